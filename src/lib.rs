@@ -1,0 +1,10 @@
+//! dreampolicy: the DreamPolicy pipeline (terrain specialists, diffusion world
+//! model, unified goal-conditioned policy) for the Unitree G1 on MuJoCo.
+//!
+//! Module map (kept in sync with the README):
+//! * [`sim`] safe MuJoCo layer over our `mujoco-sys` FFI crate
+//! * [`robot`] G1 facts: joint order, motors, body sets, scene files
+//! * [`bench`] the `dreampolicy bench ...` measurements
+pub mod bench;
+pub mod robot;
+pub mod sim;
