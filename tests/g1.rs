@@ -1,0 +1,101 @@
+//! The G1 scene: it loads, its joint order is ours, it stands under zero action
+//! and falls without gains.
+use std::sync::Arc;
+
+use dreampolicy::robot::{self, G1, JOINT_NAMES, NUM_JOINTS};
+use dreampolicy::sim::{Data, Model, ObjType};
+
+fn flat() -> (Arc<Model>, G1) {
+    let model = robot::load_flat().expect("G1 flat scene loads (run scripts/setup.sh)");
+    let g1 = G1::resolve(&model).unwrap();
+    (Arc::new(model), g1)
+}
+
+#[test]
+fn scene_has_the_g1_sizes() {
+    let (m, _) = flat();
+    assert_eq!(m.nq(), 7 + NUM_JOINTS);
+    assert_eq!(m.nv(), 6 + NUM_JOINTS);
+    assert_eq!(m.nu(), NUM_JOINTS);
+    assert_eq!(m.njnt(), 1 + NUM_JOINTS);
+}
+
+#[test]
+fn joint_and_actuator_order_is_canonical() {
+    let (m, g1) = flat();
+    for (i, name) in JOINT_NAMES.iter().enumerate() {
+        // joint i+1 in the model (0 is the free joint), actuator i drives it
+        assert_eq!(m.id2name(ObjType::Joint, i + 1), Some(*name), "joint {i}");
+        assert_eq!(g1.qpos_adr[i], 7 + i);
+        assert_eq!(g1.dof_adr[i], 6 + i);
+        assert_eq!(g1.actuator[i], i, "actuator order = joint order");
+        assert_eq!(m.actuator_trnid()[i][0] as usize, i + 1);
+    }
+}
+
+#[test]
+fn robot_facts_are_consistent() {
+    let (m, g1) = flat();
+    for i in 0..NUM_JOINTS {
+        let [lo, hi] = g1.joint_range[i];
+        assert!(
+            lo < g1.default_pos[i] && g1.default_pos[i] < hi,
+            "{}",
+            JOINT_NAMES[i]
+        );
+        assert!(g1.kp[i] > 0.0 && g1.kd[i] > 0.0 && g1.effort_limit[i] > 0.0);
+        // armature written by the loader from the motor table
+        let a = m.dof_armature()[g1.dof_adr[i]];
+        assert_eq!(a, robot::motor(i).armature());
+        assert!(a > 1e-3 && a < 0.05, "{} armature {a}", JOINT_NAMES[i]);
+    }
+    // mjlab's numbers for the 7520-22 (hip roll, knee): 0.0251019 kg m^2
+    assert!((robot::Motor::M7520x22.armature() - 0.025_101_925).abs() < 1e-9);
+    // key ctrl and qpos hold the same pose
+    let kq = m.key_qpos(g1.stand_key).unwrap();
+    for i in 0..NUM_JOINTS {
+        assert_eq!(kq[g1.qpos_adr[i]], g1.default_pos[i]);
+    }
+    let total: f64 = m.body_subtreemass()[g1.pelvis];
+    assert!((30.0..40.0).contains(&total), "G1 mass {total} kg");
+}
+
+fn stand(m: &Arc<Model>, g1: &G1, seconds: f64) -> Vec<f64> {
+    let mut d = Data::new(m.clone()).unwrap();
+    d.reset_keyframe(g1.stand_key).unwrap();
+    for i in 0..NUM_JOINTS {
+        d.ctrl_mut()[g1.actuator[i]] = g1.default_pos[i];
+    }
+    let steps = (seconds / m.timestep()).round() as usize;
+    let mut heights = Vec::with_capacity(steps);
+    for _ in 0..steps {
+        d.step().unwrap();
+        heights.push(d.xpos()[g1.pelvis][2]);
+    }
+    heights
+}
+
+#[test]
+fn stands_for_ten_seconds_with_zero_action() {
+    let (m, g1) = flat();
+    let h = stand(&m, &g1, 10.0);
+    let start = g1.stand_height;
+    let worst = h.iter().map(|z| (z - start).abs()).fold(0.0, f64::max);
+    assert!(worst < 0.05, "pelvis left {start:.3} m by {worst:.3} m");
+}
+
+#[test]
+fn falls_with_zero_gains() {
+    let model = robot::load_flat().unwrap();
+    let g1 = G1::resolve(&model).unwrap();
+    let mut model = model;
+    let (ng, nb) = (mujoco_sys::mjNGAIN as usize, mujoco_sys::mjNBIAS as usize);
+    for a in 0..model.nu() {
+        model.actuator_gainprm_mut()[a * ng] = 0.0;
+        model.actuator_biasprm_mut()[a * nb + 1] = 0.0;
+        model.actuator_biasprm_mut()[a * nb + 2] = 0.0;
+    }
+    let h = stand(&Arc::new(model), &g1, 3.0);
+    let end = *h.last().unwrap();
+    assert!(end < 0.4, "pelvis still at {end:.3} m without gains");
+}
