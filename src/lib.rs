@@ -4,7 +4,9 @@
 //! Module map (kept in sync with the README):
 //! * [`sim`] safe MuJoCo layer over our `mujoco-sys` FFI crate
 //! * [`robot`] G1 facts: joint order, motors, body sets, scene files
+//! * [`terrain`] procedural heightfields: terrain kinds, curriculum map, lanes, PNGs
 //! * [`bench`] the `dreampolicy bench ...` measurements
 pub mod bench;
 pub mod robot;
 pub mod sim;
+pub mod terrain;
