@@ -17,6 +17,11 @@
 //! (row = y, column = x). A robot walks along +x through a tile.
 pub mod config;
 pub mod kinds;
+pub mod lane;
+pub mod map;
+
+mod canvas;
+mod shapes;
 
 use std::path::PathBuf;
 
@@ -25,6 +30,9 @@ pub use config::{
     TerrainConfig, UnevenParams, WaveParams,
 };
 pub use kinds::{TerrainKind, COMBINED_PAIRS};
+pub use lane::{Lane, Segment};
+pub use map::{tile_rng, TerrainMap, TileBounds};
+pub use shapes::{TileGrid, TileParams, Wave};
 
 /// Metres from a tile's (or lane's) start to the spawn point on its centre line.
 pub const SPAWN_OFFSET: f64 = 1.0;
