@@ -19,6 +19,7 @@ pub mod config;
 pub mod kinds;
 pub mod lane;
 pub mod map;
+pub mod render;
 
 mod canvas;
 mod shapes;
