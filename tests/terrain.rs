@@ -11,7 +11,7 @@ use dreampolicy::sim::{Data, HeightField, Model, ObjType};
 use dreampolicy::terrain::render::{lane_png_size, png_size, render_kind, render_lane, render_map};
 use dreampolicy::terrain::{
     tile_rng, Curriculum, TerrainConfig, TerrainError, TerrainKind, TerrainMap, TileParams,
-    COMBINED_PAIRS,
+    WaveParams, COMBINED_PAIRS,
 };
 
 const SEEDS: [u64; 3] = [1, 2, 3];
@@ -924,6 +924,61 @@ fn bad_configs_are_clear_errors() {
     assert_eq!(TerrainConfig::from_yaml_str(&text).unwrap(), cfg);
     let err = TerrainConfig::from_yaml_file("/no/such/terrain.yaml").unwrap_err();
     assert!(err.to_string().contains("/no/such/terrain.yaml"));
+}
+
+#[test]
+fn odd_but_valid_configs_generate_without_panicking() {
+    let base = TerrainConfig {
+        kinds: TerrainKind::ALL.into_iter().map(|k| (k, 1.0)).collect(),
+        num_cols: 9,
+        ..TerrainConfig::default()
+    };
+    let configs = [
+        TerrainConfig {
+            horizontal_scale: 0.5,
+            roughness_cell: 0.5,
+            tile_length: 2.5,
+            tile_width: 0.5,
+            border: 0.0,
+            ..base.clone()
+        },
+        TerrainConfig {
+            horizontal_scale: 0.1,
+            num_levels: 1,
+            roughness_cell: 0.1,
+            ..base.clone()
+        },
+        TerrainConfig {
+            base_roughness: 0.0,
+            min_roughness: 0.0,
+            num_levels: 2,
+            ..base.clone()
+        },
+        TerrainConfig {
+            wave: WaveParams {
+                count: Curriculum([0.0, 0.0]),
+                ..WaveParams::default()
+            },
+            tile_width: 0.5,
+            arch_length: 0.1,
+            ..base.clone()
+        },
+    ];
+    for cfg in &configs {
+        let map = TerrainMap::generate(cfg, 5).unwrap();
+        assert!(map.heights().iter().all(|h| h.is_finite()));
+        let data = map.hfield_data();
+        assert!(data.iter().all(|v| (0.0..=1.0).contains(v)));
+        assert!(map.hfield_size()[2] >= 1e-3);
+        let _ = map.height_field();
+        for kind in TerrainKind::ALL {
+            let lane = TerrainMap::lane(cfg, kind, cfg.max_level(), 1.0, 0.5, 1).unwrap();
+            assert!(lane.map().heights().iter().all(|h| h.is_finite()), "{kind}");
+        }
+        for (a, b) in COMBINED_PAIRS {
+            TerrainMap::combined_lane(cfg, a, b, 0, 2.0, 0.5, 1).unwrap();
+        }
+    }
 }
 
 fn png_dims(path: &std::path::Path) -> (u32, u32) {

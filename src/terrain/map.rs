@@ -314,6 +314,9 @@ impl TerrainMap {
 
     /// MuJoCo's hfield `size`: half extents in x and y, the elevation range
     /// (at least [`MIN_ELEVATION_RANGE`]) and the base depth [`HFIELD_BASE`].
+    /// MuJoCo fixes `size` and the geom's `pos` when it compiles the model, so
+    /// another map uploaded into the same model at run time must share them
+    /// (same layout and height range); otherwise compile a new model.
     pub fn hfield_size(&self) -> [f64; 4] {
         let [ex, ey] = self.extent();
         let [lo, hi] = self.height_range();

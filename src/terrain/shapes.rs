@@ -144,9 +144,10 @@ impl TerrainKind {
             samples(cfg.tile_width, hs, 1),
             hs,
         );
+        let i0 = samples(SPAWN_OFFSET + SPAWN_CLEARANCE, hs, 1).min(c.nx);
         let region = Region {
-            i0: samples(SPAWN_OFFSET + SPAWN_CLEARANCE, hs, 1),
-            i1: c.nx - samples(END_CLEARANCE, hs, 0),
+            i0,
+            i1: c.nx.saturating_sub(samples(END_CLEARANCE, hs, 0)).max(i0),
         };
         let ctx = Ctx {
             cfg,
