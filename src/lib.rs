@@ -5,8 +5,12 @@
 //! * [`sim`] safe MuJoCo layer over our `mujoco-sys` FFI crate
 //! * [`robot`] G1 facts: joint order, motors, body sets, scene files
 //! * [`terrain`] procedural heightfields: terrain kinds, curriculum map, lanes, PNGs
+//! * [`env`] the locomotion env and the batched `VecEnv`
+//! * [`config`] serde structs of the YAML experiment files
 //! * [`bench`] the `dreampolicy bench ...` measurements
 pub mod bench;
+pub mod config;
+pub mod env;
 pub mod robot;
 pub mod sim;
 pub mod terrain;

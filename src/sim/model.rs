@@ -472,6 +472,21 @@ impl Model {
         Ok(())
     }
 
+    /// Recompute derived constants (`mj_setConst`: subtree masses, actuator
+    /// lengths at qpos0, ...) after changing masses or other parameters.
+    pub fn set_const(&mut self) -> Result<(), SimError> {
+        // SAFETY: a temporary mjData for this model, freed before returning.
+        unsafe {
+            let d = sys::mj_makeData(self.as_ptr());
+            if d.is_null() {
+                return Err(SimError::MakeData(self.source.clone()));
+            }
+            sys::mj_setConst(self.ptr.as_ptr(), d);
+            sys::mj_deleteData(d);
+        }
+        Ok(())
+    }
+
     // --- heightfields ----------------------------------------------------------
 
     /// Dimensions of heightfield `id`.

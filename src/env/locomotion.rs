@@ -1,0 +1,546 @@
+//! One G1 locomotion environment.
+//!
+//! The order of one control step ([`LocoEnv::step`]), in one place:
+//! 1. clip the action, push it into the latency buffer, take the delayed one;
+//! 2. `ctrl = q_default + action_scale * a_delayed` (MuJoCo's PD actuators, torques
+//!    clipped to the effort limits by `forcerange`);
+//! 3. `decimation` physics steps, each checked for a blow-up;
+//! 4. derive the state (`EnvState`): pelvis, joints, torques, feet contacts and air
+//!    time, collisions, terrain under the robot;
+//! 5. steer the yaw-rate command toward the heading (heading mode);
+//! 6. terminations (fall: height, tilt, fatal body contact) and truncations
+//!    (time-out, edge of the map);
+//! 7. reward terms (`weight * term * dt`), added to the episode sums;
+//! 8. timers: command resampling, pushes;
+//! 9. if the episode ended: keep the final observation, update the curriculum,
+//!    reset;
+//! 10. observations (actor with noise, critic, scandots).
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use super::obs::{self, CRITIC_DIM, OBS_DIM, SCAN_DIM};
+use super::scene::BodyClass;
+use super::state::{rotate_inv, rpy, wrap_angle, EnvState};
+use super::{EnvShared, Outcome};
+use crate::config::TerrainMode;
+use crate::robot::NUM_JOINTS;
+use crate::sim::{contact_geoms, Data, SimError};
+
+/// Longest supported action latency (control steps).
+pub const MAX_LATENCY: usize = 8;
+
+/// One environment: its MuJoCo state, its RNG and its episode bookkeeping.
+pub struct LocoEnv {
+    data: Data,
+    pub(crate) bucket: usize,
+    rng: ChaCha8Rng,
+    pub(crate) state: EnvState,
+    step_in_episode: u64,
+    actions: [[f64; NUM_JOINTS]; MAX_LATENCY + 1],
+    latency: usize,
+    pub(crate) spawn: [f64; 3],
+    pub(crate) level: usize,
+    pub(crate) col: usize,
+    pub(crate) episode_sums: Vec<f64>,
+    last_sums: Vec<f64>,
+    goal_x: f64,
+    past_goal: bool,
+    fatal_contact: bool,
+}
+
+/// Where one env writes its outputs (its rows of the batch buffers).
+pub struct EnvOut<'a> {
+    pub obs: &'a mut [f32],
+    pub critic: &'a mut [f32],
+    pub scan: &'a mut [f32],
+    pub final_obs: &'a mut [f32],
+    pub final_critic: &'a mut [f32],
+    pub final_scan: &'a mut [f32],
+}
+
+impl LocoEnv {
+    /// A new env bound to `bucket`, seeded by `seed`, placed and reset.
+    pub fn new(sh: &EnvShared, index: usize, seed: u64) -> Result<LocoEnv, SimError> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let bucket = rng.random_range(0..sh.scene.models.len());
+        let mut data = Data::new(sh.scene.models[bucket].clone())?;
+        data.set_max_qvel(sh.cfg.sim.max_qvel);
+        let g1 = &sh.scene.g1;
+        let (level, col) = match &sh.scene.terrain {
+            Some(map) => (
+                rng.random_range(0..=sh.cfg.terrain.init_max_level.min(map.num_levels() - 1)),
+                index % map.num_cols(),
+            ),
+            None => (0, 0),
+        };
+        let mut env = LocoEnv {
+            data,
+            bucket,
+            rng,
+            state: EnvState::new(sh.dt, g1.default_pos, g1.joint_range),
+            step_in_episode: 0,
+            actions: [[0.0; NUM_JOINTS]; MAX_LATENCY + 1],
+            latency: 0,
+            spawn: [0.0; 3],
+            level,
+            col,
+            episode_sums: vec![0.0; sh.rewards.len()],
+            last_sums: vec![0.0; sh.rewards.len()],
+            goal_x: f64::INFINITY,
+            past_goal: false,
+            fatal_contact: false,
+        };
+        env.reset(sh);
+        Ok(env)
+    }
+
+    pub fn data(&self) -> &Data {
+        &self.data
+    }
+
+    pub(crate) fn data_mut(&mut self) -> &mut Data {
+        &mut self.data
+    }
+
+    /// Raw MuJoCo pointers of this env (benchmark baselines only).
+    pub fn raw_ptrs(&mut self) -> (*const mujoco_sys::mjModel, *mut mujoco_sys::mjData) {
+        self.data.as_raw_ptrs()
+    }
+
+    pub fn state(&self) -> &EnvState {
+        &self.state
+    }
+
+    pub fn terrain_level(&self) -> usize {
+        self.level
+    }
+
+    /// Per-term reward sums of the last finished episode (order of `RewardSet::names`).
+    pub fn last_episode_sums(&self) -> &[f64] {
+        &self.last_sums
+    }
+
+    /// Reset and write the first observations.
+    pub fn reset_and_observe(
+        &mut self,
+        sh: &EnvShared,
+        obs: &mut [f32],
+        critic: &mut [f32],
+        scan: &mut [f32],
+    ) {
+        self.reset(sh);
+        self.write_obs(sh, obs, critic, scan);
+    }
+
+    /// Put the robot at its tile's spawn point in the default pose and start an episode.
+    pub fn reset(&mut self, sh: &EnvShared) {
+        let g1 = &sh.scene.g1;
+        self.spawn = match &sh.scene.terrain {
+            Some(map) => map.spawn(self.level, self.col),
+            None => [0.0, 0.0, 0.0],
+        };
+        self.goal_x = match &sh.scene.terrain {
+            Some(map) => map.tile_bounds(self.level, self.col).x[1],
+            None => f64::INFINITY,
+        };
+        let init = &sh.cfg.init;
+        let yaw = self.rng.random_range(init.yaw[0]..=init.yaw[1]);
+        self.data
+            .reset_keyframe(g1.stand_key)
+            .expect("stand keyframe resolved at build");
+        {
+            let qpos = self.data.qpos_mut();
+            qpos[0] = self.spawn[0];
+            qpos[1] = self.spawn[1];
+            qpos[2] = self.spawn[2] + g1.stand_height + init.height_offset;
+            let (s, c) = (0.5 * yaw).sin_cos();
+            qpos[3..7].copy_from_slice(&[c, 0.0, 0.0, s]);
+        }
+        for i in 0..NUM_JOINTS {
+            let noise = self.rng.random_range(-1.0..=1.0) * init.joint_pos_noise;
+            let [lo, hi] = g1.joint_range[i];
+            self.data.qpos_mut()[g1.qpos_adr[i]] = (g1.default_pos[i] + noise).clamp(lo, hi);
+            self.data.ctrl_mut()[g1.actuator[i]] = g1.default_pos[i];
+        }
+        self.data.forward();
+        self.actions = [[0.0; NUM_JOINTS]; MAX_LATENCY + 1];
+        let lat = sh.cfg.domain_rand.action_latency;
+        self.latency = if sh.cfg.domain_rand.enabled {
+            self.rng.random_range(lat[0]..=lat[1]).min(MAX_LATENCY)
+        } else {
+            0
+        };
+        self.step_in_episode = 0;
+        self.past_goal = false;
+        self.episode_sums.iter_mut().for_each(|s| *s = 0.0);
+        self.state.action = [0.0; NUM_JOINTS];
+        self.state.last_action = [0.0; NUM_JOINTS];
+        self.state.last_last_action = [0.0; NUM_JOINTS];
+        self.state.feet_air_time = [0.0; 2];
+        self.state.terrain_level = self.level;
+        self.resample_command(sh);
+        self.derive_state(sh);
+        self.state.last_qd = self.state.qd;
+        self.state.last_torque = self.state.torque;
+    }
+
+    fn resample_command(&mut self, sh: &EnvShared) {
+        let c = &sh.cfg.commands;
+        let mut u = |r: [f64; 2]| self.rng.random_range(r[0]..=r[1]);
+        let (vx, vy, wz) = (u(c.lin_vel_x), u(c.lin_vel_y), u(c.ang_vel_yaw));
+        let heading = c.heading_command.then(|| u(c.heading));
+        let planar = if vx.hypot(vy) < c.min_norm {
+            (0.0, 0.0)
+        } else {
+            (vx, vy)
+        };
+        self.state.command = [planar.0, planar.1, wz];
+        self.state.heading_target = heading;
+    }
+
+    /// One control step (see the module doc for the order). Returns this step's
+    /// reward and how the episode stands; writes observations into `out`.
+    pub fn step(&mut self, sh: &EnvShared, action: &[f32], out: EnvOut<'_>) -> Outcome {
+        let clip = sh.cfg.control.clip_actions;
+        let s = &mut self.state;
+        s.last_last_action = s.last_action;
+        s.last_action = s.action;
+        for i in 0..NUM_JOINTS {
+            let a = action[i] as f64;
+            s.action[i] = if a.is_finite() {
+                a.clamp(-clip, clip)
+            } else {
+                0.0
+            };
+        }
+        self.actions.rotate_right(1);
+        self.actions[0] = s.action;
+        let applied = self.actions[self.latency];
+        let g1 = &sh.scene.g1;
+        let scale = sh.cfg.control.action_scale;
+        {
+            let ctrl = self.data.ctrl_mut();
+            for i in 0..NUM_JOINTS {
+                ctrl[g1.actuator[i]] = g1.default_pos[i] + scale * applied[i];
+            }
+        }
+        let mut blowup = false;
+        for _ in 0..sh.cfg.sim.decimation {
+            if self.data.step().is_err() {
+                blowup = true;
+                break;
+            }
+        }
+        self.step_in_episode += 1;
+        if blowup {
+            // MuJoCo may already have reset the state: report the last good
+            // observation as final, count it, start over.
+            out.final_obs.copy_from_slice(out.obs);
+            out.final_critic.copy_from_slice(out.critic);
+            out.final_scan.copy_from_slice(out.scan);
+            self.last_sums.copy_from_slice(&self.episode_sums);
+            self.reset(sh);
+            self.write_obs(sh, out.obs, out.critic, out.scan);
+            return Outcome {
+                reward: 0.0,
+                terminated: true,
+                truncated: false,
+                blowup: true,
+                episode_done: true,
+            };
+        }
+        self.state.last_qd = self.state.qd;
+        self.state.last_torque = self.state.torque;
+        self.derive_state(sh);
+        self.steer_heading(sh);
+
+        // terminations and truncations
+        let t = &sh.cfg.termination;
+        let s = &mut self.state;
+        let fell = s.base_height < t.min_base_height
+            || -s.gravity[2] < sh.cos_max_tilt
+            || self.fatal_contact;
+        s.terminated = fell;
+        let timeout = self.step_in_episode >= sh.max_episode_steps;
+        let off_map = sh.scene.terrain.as_ref().is_some_and(|m| {
+            let [lx, ly] = m.extent();
+            let (x, y, e) = (s.base_pos[0], s.base_pos[1], t.map_margin);
+            x < e || y < e || x > lx - e || y > ly - e
+        });
+        let beyond = s.base_pos[0] >= self.goal_x;
+        s.reached_goal = beyond && !self.past_goal;
+        self.past_goal |= beyond;
+        let reward = sh.rewards.compute(&self.state, &mut self.episode_sums);
+
+        // timers
+        let k = self.step_in_episode;
+        if k.is_multiple_of(sh.resample_steps) {
+            self.resample_command(sh);
+        }
+        if sh.push_steps > 0 && k.is_multiple_of(sh.push_steps) {
+            let v = sh.cfg.domain_rand.max_push_vel;
+            let (dx, dy) = (self.rng.random_range(-v..=v), self.rng.random_range(-v..=v));
+            let qvel = self.data.qvel_mut();
+            qvel[0] += dx;
+            qvel[1] += dy;
+        }
+
+        let truncated = !fell && (timeout || off_map);
+        let done = fell || truncated;
+        if done {
+            self.write_obs(sh, out.final_obs, out.final_critic, out.final_scan);
+            self.update_curriculum(sh);
+            self.last_sums.copy_from_slice(&self.episode_sums);
+            self.reset(sh);
+        }
+        self.write_obs(sh, out.obs, out.critic, out.scan);
+        Outcome {
+            reward: reward as f32,
+            terminated: fell,
+            truncated,
+            blowup: false,
+            episode_done: done,
+        }
+    }
+}
+
+impl LocoEnv {
+    /// Read the MuJoCo state into `self.state` (step 4 of the step order).
+    fn derive_state(&mut self, sh: &EnvShared) {
+        let scene = &sh.scene;
+        let g1 = &scene.g1;
+        let d = &self.data;
+        let s = &mut self.state;
+        let qpos = d.qpos();
+        let qvel = d.qvel();
+        s.base_pos = [qpos[0], qpos[1], qpos[2]];
+        s.base_rot = d.xmat()[g1.pelvis];
+        s.base_lin_vel_world = [qvel[0], qvel[1], qvel[2]];
+        s.base_lin_vel = rotate_inv(&s.base_rot, s.base_lin_vel_world);
+        s.base_ang_vel = [qvel[3], qvel[4], qvel[5]];
+        s.gravity = rotate_inv(&s.base_rot, [0.0, 0.0, -1.0]);
+        s.yaw = s.base_rot[3].atan2(s.base_rot[0]);
+        s.base_height = s.base_pos[2] - scene.ground(s.base_pos[0], s.base_pos[1]);
+        let force = d.actuator_force();
+        for i in 0..NUM_JOINTS {
+            s.q[i] = qpos[g1.qpos_adr[i]];
+            s.qd[i] = qvel[g1.dof_adr[i]];
+            s.torque[i] = force[g1.actuator[i]];
+        }
+        let xpos = d.xpos();
+        let xmat = d.xmat();
+        for f in 0..2 {
+            s.feet_pos[f] = xpos[g1.feet[f]];
+            s.feet_rpy[f] = rpy(&xmat[g1.feet[f]]);
+            s.feet_ground[f] = scene.ground(s.feet_pos[f][0], s.feet_pos[f][1]);
+            s.feet_on_edge[f] = scene
+                .terrain
+                .as_ref()
+                .is_some_and(|m| m.is_edge(s.feet_pos[f][0], s.feet_pos[f][1]));
+            s.knees_pos[f] = xpos[g1.knees[f]];
+        }
+
+        // contacts with the ground: feet forces, collisions, fatal contacts
+        let model = d.model();
+        let geom_body = model.geom_bodyid();
+        let params = &sh.rewards.params;
+        s.feet_force = [[0.0; 3]; 2];
+        s.collisions = 0;
+        let mut collided = [false; 64];
+        self.fatal_contact = false;
+        for (i, c) in d.contacts().iter().enumerate() {
+            let (g1c, g2c) = contact_geoms(c);
+            let (b1, b2) = (
+                geom_body[g1c as usize] as usize,
+                geom_body[g2c as usize] as usize,
+            );
+            let (body, robot_is_second) = match (scene.body_class[b1], scene.body_class[b2]) {
+                (BodyClass::World, _) => (b2, true),
+                (_, BodyClass::World) => (b1, false),
+                _ => continue, // self-collision
+            };
+            let Some(f) = d.contact_force(i) else {
+                continue;
+            };
+            match scene.body_class[body] {
+                BodyClass::Foot(k) => {
+                    // contact frame rows: normal, tangent1, tangent2 (world); the force
+                    // acts on geom2 along +normal, so flip it when the foot is geom1
+                    let sign = if robot_is_second { 1.0 } else { -1.0 };
+                    let fr = &c.frame;
+                    for a in 0..3 {
+                        s.feet_force[k][a] +=
+                            sign * (f[0] * fr[a] + f[1] * fr[3 + a] + f[2] * fr[6 + a]);
+                    }
+                }
+                class => {
+                    let magnitude = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+                    if magnitude > params.collision_force
+                        && body < collided.len()
+                        && !collided[body]
+                    {
+                        collided[body] = true;
+                        s.collisions += 1;
+                    }
+                    if class == BodyClass::Fatal && magnitude > sh.cfg.termination.contact_force {
+                        self.fatal_contact = true;
+                    }
+                }
+            }
+        }
+        // feet air time (legged_gym): contact = vertical force above 1 N
+        for k in 0..2 {
+            let contact = s.feet_force[k][2] > 1.0;
+            s.feet_first_contact[k] = contact && s.feet_air_time[k] > 0.0;
+            s.feet_touchdown_air_time[k] = if s.feet_first_contact[k] {
+                s.feet_air_time[k] + s.dt
+            } else {
+                0.0
+            };
+            s.feet_air_time[k] = if contact {
+                0.0
+            } else {
+                s.feet_air_time[k] + s.dt
+            };
+            s.feet_contact[k] = contact;
+        }
+        s.terrain_level = self.level;
+    }
+
+    /// Heading mode: yaw-rate command = clip(k * wrap(heading - yaw)).
+    fn steer_heading(&mut self, sh: &EnvShared) {
+        let c = &sh.cfg.commands;
+        if let Some(h) = self.state.heading_target {
+            let w = c.heading_stiffness * wrap_angle(h - self.state.yaw);
+            self.state.command[2] = w.clamp(c.ang_vel_yaw[0], c.ang_vel_yaw[1]);
+        }
+    }
+
+    /// legged_gym's terrain curriculum, at the end of an episode: walked more than
+    /// half a tile => one level up (past the top: a random level); walked less than
+    /// half of what the command asked for => one level down.
+    fn update_curriculum(&mut self, sh: &EnvShared) {
+        let Some(map) = &sh.scene.terrain else { return };
+        if !sh.cfg.terrain.curriculum || sh.cfg.terrain.mode != TerrainMode::Map {
+            return;
+        }
+        let s = &self.state;
+        let walked = (s.base_pos[0] - self.spawn[0]).hypot(s.base_pos[1] - self.spawn[1]);
+        let asked = s.command[0].hypot(s.command[1]) * sh.cfg.episode_length_s * 0.5;
+        let b = map.tile_bounds(self.level, self.col);
+        let up = walked > (b.x[1] - b.x[0]) / 2.0;
+        let down = !up && walked < asked;
+        self.level = next_level(self.level, up, down, map.num_levels(), &mut self.rng);
+    }
+
+    /// Observations of the current state (step 10).
+    fn write_obs(&mut self, sh: &EnvShared, obs: &mut [f32], critic: &mut [f32], scan: &mut [f32]) {
+        let s = &self.state;
+        let oc = &sh.cfg.observation;
+        let sc = &oc.scales;
+        let phase = {
+            let t = self.step_in_episode as f64 * s.dt;
+            2.0 * std::f64::consts::PI * (t / oc.gait_period_s).fract()
+        };
+        // noise-free state into the critic's first OBS_DIM entries
+        let clip = oc.clip;
+        let put = |buf: &mut [f32], i: usize, v: f64| buf[i] = v.clamp(-clip, clip) as f32;
+        for a in 0..3 {
+            put(
+                critic,
+                obs::ANG_VEL.start + a,
+                s.base_ang_vel[a] * sc.ang_vel,
+            );
+            put(critic, obs::GRAVITY.start + a, s.gravity[a]);
+            put(
+                critic,
+                obs::COMMAND.start + a,
+                s.command[a] * sc.commands[a],
+            );
+        }
+        for j in 0..NUM_JOINTS {
+            put(
+                critic,
+                obs::DOF_POS.start + j,
+                (s.q[j] - s.default_q[j]) * sc.dof_pos,
+            );
+            put(critic, obs::DOF_VEL.start + j, s.qd[j] * sc.dof_vel);
+            put(critic, obs::LAST_ACTION.start + j, s.action[j]);
+        }
+        put(critic, obs::PHASE.start, phase.sin());
+        put(critic, obs::PHASE.start + 1, phase.cos());
+        // privileged block
+        let p = OBS_DIM;
+        for a in 0..3 {
+            put(critic, p + a, s.base_lin_vel[a] * sc.lin_vel);
+        }
+        put(critic, p + 3, s.base_height);
+        for k in 0..2 {
+            for a in 0..3 {
+                put(
+                    critic,
+                    p + 4 + 3 * k + a,
+                    s.feet_force[k][a] / sh.scene.robot_weight,
+                );
+            }
+        }
+        let b = sh.scene.buckets[self.bucket];
+        put(critic, p + 10, b.friction);
+        put(critic, p + 11, b.added_mass);
+        put(critic, p + 12, b.motor_strength);
+        put(critic, p + 13, self.latency as f64);
+        debug_assert_eq!(p + 14, CRITIC_DIM);
+
+        // actor = critic's state + noise
+        obs.copy_from_slice(&critic[..OBS_DIM]);
+        if oc.add_noise {
+            let (n, lvl) = (&oc.noise, oc.noise_level);
+            let mut add = |r: std::ops::Range<usize>, width: f64| {
+                for i in r {
+                    let e = self.rng.random_range(-1.0..=1.0) * width * lvl;
+                    obs[i] = (obs[i] as f64 + e).clamp(-clip, clip) as f32;
+                }
+            };
+            add(obs::ANG_VEL, n.ang_vel * sc.ang_vel);
+            add(obs::GRAVITY, n.gravity);
+            add(obs::DOF_POS, n.dof_pos * sc.dof_pos);
+            add(obs::DOF_VEL, n.dof_vel * sc.dof_vel);
+        }
+
+        // scandots
+        let (sy, cy) = s.yaw.sin_cos();
+        let noise = if oc.add_noise {
+            oc.noise.scan * oc.noise_level
+        } else {
+            0.0
+        };
+        for k in 0..SCAN_DIM {
+            let (px, py) = obs::scan_point(k);
+            let x = s.base_pos[0] + cy * px - sy * py;
+            let y = s.base_pos[1] + sy * px + cy * py;
+            let rel = (sh.scene.ground(x, y) - s.base_pos[2]).clamp(-oc.scan_clip, oc.scan_clip);
+            let e = if noise > 0.0 {
+                self.rng.random_range(-noise..=noise)
+            } else {
+                0.0
+            };
+            scan[k] = ((rel + e) * sc.scan) as f32;
+        }
+    }
+}
+
+/// One curriculum move. Past the top level an env goes to a random level
+/// (legged_gym), so that solved terrains keep being visited.
+pub fn next_level(level: usize, up: bool, down: bool, levels: usize, rng: &mut impl Rng) -> usize {
+    if up {
+        if level + 1 >= levels {
+            rng.random_range(0..levels)
+        } else {
+            level + 1
+        }
+    } else if down {
+        level.saturating_sub(1)
+    } else {
+        level
+    }
+}

@@ -1,0 +1,324 @@
+//! Reward terms by name: each a small function of the env state, registered in
+//! one table. The YAML lists `name: weight`; an unknown name is a load error that
+//! lists [`names`]. A step's reward is `sum(weight * term * dt)`.
+//!
+//! The paper's base table (orientation ... ang_vel_xy) and specialist table
+//! (tracking_goal_vel ... feet_air_time) are all here, plus legged_gym's
+//! velocity-tracking terms for the flat walker. Where the paper's formula is
+//! ambiguous, the doc line says how it is read.
+use super::state::{wrap_angle, EnvState};
+use crate::config::RewardParams;
+use crate::robot::HIP_ROLL_YAW;
+
+/// One reward term.
+pub struct Term {
+    pub name: &'static str,
+    pub f: fn(&EnvState, &RewardParams) -> f64,
+    pub doc: &'static str,
+}
+
+macro_rules! terms {
+    ($($name:ident: $doc:literal;)*) => {
+        /// Every term, in a fixed order (the order of the per-term logs).
+        pub static TERMS: &[Term] = &[$(Term { name: stringify!($name), f: $name, doc: $doc }),*];
+    };
+}
+
+terms! {
+    orientation: "sum(g_x^2 + g_y^2): tilt of the pelvis";
+    dof_acc: "sum(((qd_t - qd_t-1) / dt)^2)";
+    collision: "number of non-foot bodies touching the ground (|F| > collision_force)";
+    action_rate: "||a_t - a_t-1|| (L2 norm, as the paper writes it)";
+    delta_torques: "sum((tau_t - tau_t-1)^2)";
+    torques: "sum(tau^2)";
+    dof_error: "sum((q - q_default)^2)";
+    base_height: "(h_base - base_height_target)^2, h above the terrain";
+    smoothness: "||a_t - a_t-1|| + ||a_t - 2 a_t-1 + a_t-2||";
+    alive: "1 every step";
+    tracking_yaw: "exp(-|yaw_target - yaw|^2 / 0.25); yaw_target = heading command (heading mode) else yaw + yaw_rate_cmd * dt";
+    lin_vel_z: "v_z^2 (pelvis frame)";
+    ang_vel_xy: "w_x^2 + w_y^2 (pelvis frame)";
+    tracking_goal_vel: "min(v . v_cmd/|v_cmd|, |v_cmd|) / |v_cmd| over the planar command (0 when |v_cmd| < 0.05)";
+    hip_pos: "sum((q_hip - q_default)^2) over hip roll and yaw";
+    feet_stumble: "1 if a foot's horizontal contact force exceeds 4 |F_z|";
+    feet_edge: "number of feet in contact on a terrain edge, when terrain level >= feet_edge_min_level";
+    feet_parallel: "sum(pitch_foot^2), foot pitch in the world frame";
+    huge_step: "|x_left_ankle - x_right_ankle| in the heading frame";
+    feet_yaw: "sum(wrap(yaw_foot - yaw_base)^2)";
+    feet_dis: "(|y_left - y_right| - feet_distance_target)^2 in the heading frame (deviation from a stance width; the paper's literal square would pull the feet together)";
+    knee_dis: "(|y_left_knee - y_right_knee| - feet_distance_target)^2 in the heading frame";
+    goal: "1 on the step the robot crosses its tile's goal line";
+    knee_foot: "sum over sides of (y_knee - y_ankle)^2 in the heading frame";
+    foot_height: "sum over swing feet of min(z_foot - ground, foot_clearance_target)";
+    feet_air_time: "sum over touchdowns of (air_time - feet_air_time_target), only when |v_cmd| > 0.1";
+    tracking_lin_vel: "exp(-|v_cmd_xy - v_xy|^2 / tracking_sigma) (legged_gym)";
+    tracking_ang_vel: "exp(-(w_cmd - w_z)^2 / tracking_sigma) (legged_gym)";
+    termination: "1 on the step of a fall (not a time-out)";
+    dof_pos_limits: "sum of how far q is outside 90% of the joint range";
+    dof_vel: "sum(qd^2)";
+}
+
+/// The term with this name.
+pub fn lookup(name: &str) -> Option<&'static Term> {
+    TERMS.iter().find(|t| t.name == name)
+}
+
+/// Every valid name, for error messages.
+pub fn names() -> Vec<&'static str> {
+    TERMS.iter().map(|t| t.name).collect()
+}
+
+fn sq(x: f64) -> f64 {
+    x * x
+}
+
+fn norm(v: impl Iterator<Item = f64>) -> f64 {
+    v.map(sq).sum::<f64>().sqrt()
+}
+
+fn orientation(s: &EnvState, _: &RewardParams) -> f64 {
+    sq(s.gravity[0]) + sq(s.gravity[1])
+}
+
+fn dof_acc(s: &EnvState, _: &RewardParams) -> f64 {
+    s.qd.iter()
+        .zip(&s.last_qd)
+        .map(|(a, b)| sq((a - b) / s.dt))
+        .sum()
+}
+
+fn collision(s: &EnvState, _: &RewardParams) -> f64 {
+    s.collisions as f64
+}
+
+fn action_rate(s: &EnvState, _: &RewardParams) -> f64 {
+    norm(s.action.iter().zip(&s.last_action).map(|(a, b)| a - b))
+}
+
+fn delta_torques(s: &EnvState, _: &RewardParams) -> f64 {
+    s.torque
+        .iter()
+        .zip(&s.last_torque)
+        .map(|(a, b)| sq(a - b))
+        .sum()
+}
+
+fn torques(s: &EnvState, _: &RewardParams) -> f64 {
+    s.torque.iter().map(|t| sq(*t)).sum()
+}
+
+fn dof_error(s: &EnvState, _: &RewardParams) -> f64 {
+    s.q.iter().zip(&s.default_q).map(|(q, d)| sq(q - d)).sum()
+}
+
+fn base_height(s: &EnvState, p: &RewardParams) -> f64 {
+    sq(s.base_height - p.base_height_target)
+}
+
+fn smoothness(s: &EnvState, _: &RewardParams) -> f64 {
+    let first = norm(s.action.iter().zip(&s.last_action).map(|(a, b)| a - b));
+    let second = norm(
+        (0..s.action.len()).map(|i| s.action[i] - 2.0 * s.last_action[i] + s.last_last_action[i]),
+    );
+    first + second
+}
+
+fn alive(_: &EnvState, _: &RewardParams) -> f64 {
+    1.0
+}
+
+fn tracking_yaw(s: &EnvState, _: &RewardParams) -> f64 {
+    let target = s.heading_target.unwrap_or(s.yaw + s.command[2] * s.dt);
+    (-sq(wrap_angle(target - s.yaw)) / 0.25).exp()
+}
+
+fn lin_vel_z(s: &EnvState, _: &RewardParams) -> f64 {
+    sq(s.base_lin_vel[2])
+}
+
+fn ang_vel_xy(s: &EnvState, _: &RewardParams) -> f64 {
+    sq(s.base_ang_vel[0]) + sq(s.base_ang_vel[1])
+}
+
+fn tracking_goal_vel(s: &EnvState, _: &RewardParams) -> f64 {
+    let cmd = (s.command[0], s.command[1]);
+    let n = cmd.0.hypot(cmd.1);
+    if n < 0.05 {
+        return 0.0;
+    }
+    let along = (s.base_lin_vel[0] * cmd.0 + s.base_lin_vel[1] * cmd.1) / n;
+    along.min(n) / n
+}
+
+fn hip_pos(s: &EnvState, _: &RewardParams) -> f64 {
+    HIP_ROLL_YAW
+        .iter()
+        .map(|&i| sq(s.q[i] - s.default_q[i]))
+        .sum()
+}
+
+fn feet_stumble(s: &EnvState, _: &RewardParams) -> f64 {
+    let stumble = s
+        .feet_force
+        .iter()
+        .any(|f| f[0].hypot(f[1]) > 4.0 * f[2].abs());
+    stumble as u8 as f64
+}
+
+fn feet_edge(s: &EnvState, p: &RewardParams) -> f64 {
+    if s.terrain_level < p.feet_edge_min_level {
+        return 0.0;
+    }
+    (0..2)
+        .filter(|&i| s.feet_contact[i] && s.feet_on_edge[i])
+        .count() as f64
+}
+
+fn feet_parallel(s: &EnvState, _: &RewardParams) -> f64 {
+    s.feet_rpy.iter().map(|r| sq(r[1])).sum()
+}
+
+/// Feet in the heading frame relative to the pelvis.
+fn feet_local(s: &EnvState) -> [[f64; 2]; 2] {
+    s.feet_pos
+        .map(|f| s.world_to_heading_xy([f[0] - s.base_pos[0], f[1] - s.base_pos[1], 0.0]))
+}
+
+fn knees_local(s: &EnvState) -> [[f64; 2]; 2] {
+    s.knees_pos
+        .map(|k| s.world_to_heading_xy([k[0] - s.base_pos[0], k[1] - s.base_pos[1], 0.0]))
+}
+
+fn huge_step(s: &EnvState, _: &RewardParams) -> f64 {
+    let f = feet_local(s);
+    (f[0][0] - f[1][0]).abs()
+}
+
+fn feet_yaw(s: &EnvState, _: &RewardParams) -> f64 {
+    s.feet_rpy
+        .iter()
+        .map(|r| sq(wrap_angle(r[2] - s.yaw)))
+        .sum()
+}
+
+fn feet_dis(s: &EnvState, p: &RewardParams) -> f64 {
+    let f = feet_local(s);
+    sq((f[0][1] - f[1][1]).abs() - p.feet_distance_target)
+}
+
+fn knee_dis(s: &EnvState, p: &RewardParams) -> f64 {
+    let k = knees_local(s);
+    sq((k[0][1] - k[1][1]).abs() - p.feet_distance_target)
+}
+
+fn goal(s: &EnvState, _: &RewardParams) -> f64 {
+    s.reached_goal as u8 as f64
+}
+
+fn knee_foot(s: &EnvState, _: &RewardParams) -> f64 {
+    let (f, k) = (feet_local(s), knees_local(s));
+    sq(k[0][1] - f[0][1]) + sq(k[1][1] - f[1][1])
+}
+
+fn foot_height(s: &EnvState, p: &RewardParams) -> f64 {
+    (0..2)
+        .filter(|&i| !s.feet_contact[i])
+        .map(|i| (s.feet_pos[i][2] - s.feet_ground[i]).min(p.foot_clearance_target))
+        .sum()
+}
+
+fn feet_air_time(s: &EnvState, p: &RewardParams) -> f64 {
+    if s.command[0].hypot(s.command[1]) <= 0.1 {
+        return 0.0;
+    }
+    (0..2)
+        .filter(|&i| s.feet_first_contact[i])
+        .map(|i| s.feet_touchdown_air_time[i] - p.feet_air_time_target)
+        .sum()
+}
+
+fn tracking_lin_vel(s: &EnvState, p: &RewardParams) -> f64 {
+    let e = sq(s.command[0] - s.base_lin_vel[0]) + sq(s.command[1] - s.base_lin_vel[1]);
+    (-e / p.tracking_sigma).exp()
+}
+
+fn tracking_ang_vel(s: &EnvState, p: &RewardParams) -> f64 {
+    (-sq(s.command[2] - s.base_ang_vel[2]) / p.tracking_sigma).exp()
+}
+
+fn termination(s: &EnvState, _: &RewardParams) -> f64 {
+    s.terminated as u8 as f64
+}
+
+fn dof_pos_limits(s: &EnvState, _: &RewardParams) -> f64 {
+    s.q.iter()
+        .zip(&s.q_range)
+        .map(|(q, [lo, hi])| {
+            let (mid, half) = ((lo + hi) / 2.0, 0.45 * (hi - lo));
+            ((mid - half) - q).max(0.0) + (q - (mid + half)).max(0.0)
+        })
+        .sum()
+}
+
+fn dof_vel(s: &EnvState, _: &RewardParams) -> f64 {
+    s.qd.iter().map(|v| sq(*v)).sum()
+}
+
+/// The configured terms resolved to functions once, with per-term episode sums.
+#[derive(Clone)]
+pub struct RewardSet {
+    terms: Vec<(&'static Term, f64)>,
+    pub params: RewardParams,
+    pub only_positive: bool,
+}
+
+impl RewardSet {
+    /// Resolve `name: weight` pairs; the config was validated, but this checks again.
+    pub fn new(cfg: &crate::config::RewardConfig) -> Result<RewardSet, String> {
+        let terms = cfg
+            .terms
+            .iter()
+            .map(|(name, &w)| {
+                lookup(name).map(|t| (t, w)).ok_or_else(|| {
+                    format!(
+                        "unknown reward term '{name}'; valid: {}",
+                        names().join(", ")
+                    )
+                })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(RewardSet {
+            terms,
+            params: cfg.params.clone(),
+            only_positive: cfg.only_positive,
+        })
+    }
+
+    pub fn len(&self) -> usize {
+        self.terms.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.terms.is_empty()
+    }
+
+    pub fn names(&self) -> Vec<&'static str> {
+        self.terms.iter().map(|(t, _)| t.name).collect()
+    }
+
+    /// Total reward of one step; adds each weighted term into `sums` (same order as `names`).
+    #[inline]
+    pub fn compute(&self, s: &EnvState, sums: &mut [f64]) -> f64 {
+        let mut total = 0.0;
+        for (i, (term, w)) in self.terms.iter().enumerate() {
+            let r = (term.f)(s, &self.params) * w * s.dt;
+            sums[i] += r;
+            total += r;
+        }
+        if self.only_positive {
+            total.max(0.0)
+        } else {
+            total
+        }
+    }
+}

@@ -1,0 +1,211 @@
+//! Reward terms by hand on known states, the weighted sum, and the curriculum rule.
+use std::collections::BTreeMap;
+
+use dreampolicy::config::{RewardConfig, RewardParams};
+use dreampolicy::env::locomotion::next_level;
+use dreampolicy::env::rewards::{lookup, names, RewardSet};
+use dreampolicy::env::EnvState;
+use dreampolicy::robot::NUM_JOINTS;
+use rand::SeedableRng;
+
+fn state() -> EnvState {
+    let mut s = EnvState::new(0.02, [0.1; NUM_JOINTS], [[-1.0, 1.0]; NUM_JOINTS]);
+    s.base_pos = [1.0, 2.0, 0.8];
+    s.base_height = 0.75;
+    s
+}
+
+fn term(name: &str, s: &EnvState) -> f64 {
+    (lookup(name).unwrap().f)(s, &RewardParams::default())
+}
+
+fn close(a: f64, b: f64) {
+    assert!((a - b).abs() < 1e-9, "{a} != {b}");
+}
+
+#[test]
+fn base_table_terms_by_hand() {
+    let mut s = state();
+    s.gravity = [0.1, -0.2, -0.97];
+    close(term("orientation", &s), 0.05);
+    s.qd[3] = 1.0;
+    s.last_qd[3] = 0.8;
+    close(term("dof_acc", &s), (0.2f64 / 0.02).powi(2));
+    s.action[0] = 0.3;
+    s.last_action[0] = 0.1;
+    s.action[1] = -0.4;
+    close(
+        term("action_rate", &s),
+        (0.2f64.powi(2) + 0.4f64.powi(2)).sqrt(),
+    );
+    s.last_last_action[0] = 0.2; // second difference: 0.3 - 0.2 + 0.2 = 0.3; -0.4 on joint 1
+    let second = (0.3f64.powi(2) + 0.4f64.powi(2)).sqrt();
+    close(
+        term("smoothness", &s),
+        (0.2f64.powi(2) + 0.4f64.powi(2)).sqrt() + second,
+    );
+    s.torque[2] = 3.0;
+    s.last_torque[2] = 1.0;
+    close(term("torques", &s), 9.0);
+    close(term("delta_torques", &s), 4.0);
+    s.q[5] = 0.4; // default 0.1
+    close(term("dof_error", &s), 0.09);
+    close(term("base_height", &s), (0.75f64 - 0.78).powi(2));
+    s.base_lin_vel = [0.3, 0.1, -0.5];
+    s.base_ang_vel = [0.2, -0.1, 0.7];
+    close(term("lin_vel_z", &s), 0.25);
+    close(term("ang_vel_xy", &s), 0.05);
+    close(term("alive", &s), 1.0);
+    s.collisions = 2;
+    close(term("collision", &s), 2.0);
+    s.yaw = 0.2;
+    s.heading_target = Some(0.7);
+    close(term("tracking_yaw", &s), (-0.25f64 / 0.25).exp());
+    // heading across +-pi wraps
+    s.yaw = 3.1;
+    s.heading_target = Some(-3.1);
+    let d = 2.0 * std::f64::consts::PI - 6.2;
+    close(term("tracking_yaw", &s), (-d * d / 0.25).exp());
+}
+
+#[test]
+fn specialist_terms_by_hand() {
+    let mut s = state();
+    s.command = [1.0, 0.0, 0.0];
+    s.base_lin_vel = [2.0, 0.0, 0.0];
+    close(term("tracking_goal_vel", &s), 1.0);
+    s.base_lin_vel = [0.5, 0.5, 0.0];
+    close(term("tracking_goal_vel", &s), 0.5);
+    close(
+        term("tracking_lin_vel", &s),
+        (-(0.25f64 + 0.25) / 0.25).exp(),
+    );
+    s.q[1] = 0.3; // hip roll (default 0.1)
+    s.q[8] = -0.1; // right hip yaw
+    close(term("hip_pos", &s), 0.04 + 0.04);
+    s.feet_force = [[0.0, 0.0, 100.0], [50.0, 0.0, 10.0]];
+    close(term("feet_stumble", &s), 1.0);
+    s.feet_force[1] = [30.0, 0.0, 10.0];
+    close(term("feet_stumble", &s), 0.0);
+    // feet in the heading frame (yaw 0): left ahead by 0.3 m and 0.25 m to the left
+    s.feet_pos = [[1.2, 2.15, 0.05], [0.9, 1.9, 0.0]];
+    close(term("huge_step", &s), 0.3);
+    close(term("feet_dis", &s), (0.25f64 - 0.22).powi(2));
+    s.knees_pos = [[1.1, 2.1, 0.4], [1.0, 1.92, 0.4]];
+    close(term("knee_dis", &s), (0.18f64 - 0.22).powi(2));
+    close(term("knee_foot", &s), 0.05f64.powi(2) + 0.02f64.powi(2));
+    s.feet_rpy = [[0.0, 0.2, 0.1], [0.0, -0.1, -0.3]];
+    close(term("feet_parallel", &s), 0.05);
+    close(term("feet_yaw", &s), 0.01 + 0.09);
+    // swing foot height, clipped at the clearance target (0.08)
+    s.feet_contact = [false, true];
+    s.feet_ground = [0.0, 0.0];
+    close(term("foot_height", &s), 0.05);
+    s.feet_pos[0][2] = 0.3;
+    close(term("foot_height", &s), 0.08);
+    // touchdown after 0.7 s in the air, target 0.5
+    s.feet_first_contact = [true, false];
+    s.feet_touchdown_air_time = [0.7, 0.0];
+    close(term("feet_air_time", &s), 0.2);
+    s.command = [0.0, 0.0, 0.5];
+    close(term("feet_air_time", &s), 0.0);
+    // edges count only in contact and from the configured level on
+    s.feet_on_edge = [true, true];
+    s.feet_contact = [true, false];
+    s.terrain_level = 2;
+    close(term("feet_edge", &s), 0.0);
+    s.terrain_level = 4;
+    close(term("feet_edge", &s), 1.0);
+    s.reached_goal = true;
+    close(term("goal", &s), 1.0);
+    s.terminated = true;
+    close(term("termination", &s), 1.0);
+    s.q[0] = 0.95; // range [-1, 1]: soft limit at 0.9
+    close(term("dof_pos_limits", &s), 0.05);
+}
+
+#[test]
+fn weighted_sum_uses_dt_and_keeps_episode_sums() {
+    let mut terms = BTreeMap::new();
+    terms.insert("alive".to_string(), 2.0);
+    terms.insert("orientation".to_string(), -10.0);
+    let cfg = RewardConfig {
+        terms,
+        params: RewardParams::default(),
+        only_positive: false,
+    };
+    let set = RewardSet::new(&cfg).unwrap();
+    assert_eq!(set.names(), vec!["alive", "orientation"]);
+    let mut s = state();
+    s.gravity = [0.3, 0.0, -0.95];
+    let mut sums = vec![0.0; 2];
+    let r = set.compute(&s, &mut sums);
+    close(r, (2.0 - 10.0 * 0.09) * 0.02);
+    set.compute(&s, &mut sums);
+    close(sums[0], 2.0 * 2.0 * 0.02);
+    close(sums[1], -2.0 * 0.9 * 0.02);
+    let clipped = RewardSet::new(&RewardConfig {
+        only_positive: true,
+        ..cfg.clone()
+    })
+    .unwrap();
+    s.gravity = [1.0, 0.0, 0.0];
+    close(clipped.compute(&s, &mut sums), 0.0);
+
+    let mut bad = cfg;
+    bad.terms.insert("fly".into(), 1.0);
+    let e = RewardSet::new(&bad).err().unwrap();
+    assert!(e.contains("'fly'") && e.contains("orientation"));
+}
+
+#[test]
+fn every_paper_term_is_registered() {
+    let base = [
+        "orientation",
+        "dof_acc",
+        "collision",
+        "action_rate",
+        "delta_torques",
+        "torques",
+        "dof_error",
+        "base_height",
+        "smoothness",
+        "alive",
+        "tracking_yaw",
+        "lin_vel_z",
+        "ang_vel_xy",
+    ];
+    let special = [
+        "tracking_goal_vel",
+        "hip_pos",
+        "feet_stumble",
+        "feet_edge",
+        "feet_parallel",
+        "huge_step",
+        "feet_yaw",
+        "feet_dis",
+        "knee_dis",
+        "goal",
+        "knee_foot",
+        "foot_height",
+        "feet_air_time",
+    ];
+    let all = names();
+    for n in base.iter().chain(&special) {
+        assert!(all.contains(n), "{n} missing");
+    }
+}
+
+#[test]
+fn curriculum_moves_levels() {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+    assert_eq!(next_level(3, true, false, 10, &mut rng), 4);
+    assert_eq!(next_level(3, false, true, 10, &mut rng), 2);
+    assert_eq!(next_level(0, false, true, 10, &mut rng), 0);
+    assert_eq!(next_level(3, false, false, 10, &mut rng), 3);
+    // past the top: a random level, all of them reachable
+    let seen: std::collections::BTreeSet<usize> = (0..500)
+        .map(|_| next_level(9, true, false, 10, &mut rng))
+        .collect();
+    assert_eq!(seen.len(), 10);
+}
