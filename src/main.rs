@@ -1,10 +1,11 @@
 //! The `dreampolicy` CLI: one subcommand per pipeline stage.
+use std::path::PathBuf;
 use std::sync::Arc;
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 
-use dreampolicy::{bench, robot, sim};
+use dreampolicy::{bench, config, robot, sim};
 
 #[derive(Parser)]
 #[command(
@@ -30,6 +31,40 @@ enum Command {
         #[command(subcommand)]
         which: BenchCommand,
     },
+    /// Procedural terrains.
+    Terrain {
+        #[command(subcommand)]
+        which: TerrainCommand,
+    },
+}
+
+#[derive(Subcommand)]
+enum TerrainCommand {
+    /// Draw a height image with a colour bar: one kind's lane (`--kind`, optionally
+    /// joined with `--then`), or the whole curriculum map (`--map`).
+    Render {
+        /// Terrain kind: flat, uneven, stair, gap, bridge, wave, slope, balancing_beam, slope_bridge.
+        #[arg(long, required_unless_present = "map")]
+        kind: Option<String>,
+        /// Second kind of a combined lane (the paper's pairs, e.g. --kind stair --then gap).
+        #[arg(long, requires = "kind")]
+        then: Option<String>,
+        /// Curriculum level (0 = easiest).
+        #[arg(long, default_value_t = 5)]
+        level: usize,
+        /// Render the whole map of the config instead of one lane.
+        #[arg(long, conflicts_with = "kind")]
+        map: bool,
+        /// Experiment config whose env.terrain.map is used (default: built-in terrain defaults).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        #[arg(long = "set")]
+        sets: Vec<String>,
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        #[arg(long)]
+        out: PathBuf,
+    },
 }
 
 #[derive(Subcommand)]
@@ -45,6 +80,22 @@ enum BenchCommand {
         #[arg(long, default_value_t = 5)]
         rounds: usize,
     },
+    /// Raw physics vs VecEnv at 1 and 2 threads, scandots direct vs mj_ray.
+    Env {
+        #[arg(long)]
+        json: bool,
+        /// Experiment config whose `env` section is measured.
+        #[arg(long, default_value = "configs/terrain_small.yaml")]
+        config: PathBuf,
+        /// Override a config value, e.g. --set env.n_envs=32 (repeatable).
+        #[arg(long = "set")]
+        sets: Vec<String>,
+        /// Control steps per round.
+        #[arg(long, default_value_t = 100)]
+        steps: usize,
+        #[arg(long, default_value_t = 3)]
+        rounds: usize,
+    },
 }
 
 fn main() {
@@ -57,6 +108,18 @@ fn main() {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
+        Command::Terrain { which } => match which {
+            TerrainCommand::Render {
+                kind,
+                then,
+                level,
+                map,
+                config,
+                sets,
+                seed,
+                out,
+            } => terrain_render(kind, then, level, map, config, sets, seed, out),
+        },
         Command::Info { json } => info(json),
         Command::Bench { which } => match which {
             BenchCommand::Sim {
@@ -71,6 +134,28 @@ fn run(cli: Cli) -> Result<()> {
                     println!(
                         "MuJoCo {}: raw mj_step {:.0} steps/s, Data::step {:.0} steps/s, ratio {:.3}",
                         r.mujoco_version, r.raw_steps_per_s, r.safe_steps_per_s, r.ratio
+                    );
+                }
+                Ok(())
+            }
+            BenchCommand::Env {
+                json,
+                config,
+                sets,
+                steps,
+                rounds,
+            } => {
+                let cfg = config::load(&config, &sets)?;
+                let r = bench::env(&cfg.env, &config.display().to_string(), steps, rounds)
+                    .context("bench env")?;
+                if json {
+                    println!("{}", serde_json::to_string(&r)?);
+                } else {
+                    println!(
+                        "MuJoCo {} ({} envs): raw {:.0} physics steps/s; env 1t {:.0} ({:.3} of raw), 2t {:.0} ({:.2}x); scandots direct {:.2e} pts/s vs mj_ray {:.2e} ({:.0}x); {:.1} contacts/env",
+                        r.mujoco_version, r.n_envs, r.raw_physics_steps_per_s, r.env_physics_steps_per_s_1t,
+                        r.ratio_1t, r.env_physics_steps_per_s_2t, r.scaling_2t, r.scan_points_per_s_direct,
+                        r.scan_points_per_s_ray, r.scan_speedup, r.contacts_per_env
                     );
                 }
                 Ok(())
@@ -110,5 +195,61 @@ fn info(json: bool) -> Result<()> {
             println!("{k:>22}: {}", v.to_string().trim_matches('"'));
         }
     }
+    Ok(())
+}
+
+#[allow(clippy::too_many_arguments)]
+fn terrain_render(
+    kind: Option<String>,
+    then: Option<String>,
+    level: usize,
+    map: bool,
+    config: Option<PathBuf>,
+    sets: Vec<String>,
+    seed: u64,
+    out: PathBuf,
+) -> Result<()> {
+    use dreampolicy::terrain::{render, TerrainKind, TerrainMap};
+    let cfg = match config {
+        Some(path) => config::load(&path, &sets)?.env.terrain.map,
+        None => dreampolicy::terrain::TerrainConfig::default(),
+    };
+    cfg.validate()?;
+    if map {
+        let m = TerrainMap::generate(&cfg, seed)?;
+        render::render_map(&m, &out)?;
+        println!(
+            "{}: {} levels x {} columns, {:.1} x {:.1} m",
+            out.display(),
+            m.num_levels(),
+            m.num_cols(),
+            m.extent()[0],
+            m.extent()[1]
+        );
+        return Ok(());
+    }
+    let first = TerrainKind::from_name(kind.as_deref().unwrap_or_default())?;
+    let lane = match then {
+        None => render::render_kind(&cfg, first, level, seed, &out)?,
+        Some(second) => {
+            let second = TerrainKind::from_name(&second)?;
+            let lane = TerrainMap::combined_lane(
+                &cfg,
+                first,
+                second,
+                level,
+                first.default_lane_length(),
+                cfg.tile_width,
+                seed,
+            )?;
+            render::render_lane(&lane, &out)?;
+            lane
+        }
+    };
+    println!(
+        "{}: level {level}, {:.1} m from spawn to goal",
+        out.display(),
+        lane.length()
+    );
     Ok(())
 }
