@@ -127,3 +127,26 @@ fn terrain_config_errors_are_clear() {
         .to_string();
     assert!(e.contains("tile_length"), "{e}");
 }
+
+#[test]
+fn flat_tiles_are_boxes_over_a_lowered_heightfield() {
+    use dreampolicy::env::scene::{Scene, FLAT_BOX_CLEARANCE};
+    use dreampolicy::terrain::TerrainKind;
+    let c = cfg(&["env.n_envs=1"]);
+    let scene = Scene::build(&c.env).unwrap();
+    let map = scene.terrain.as_ref().unwrap();
+    let flat_cols = (0..map.num_cols())
+        .filter(|&k| map.tile_kind(k) == TerrainKind::Flat)
+        .count();
+    assert_eq!(scene.flat_boxes.len(), flat_cols * map.num_levels());
+    let hf = scene.heights.as_ref().unwrap();
+    for b in &scene.flat_boxes {
+        let (x, y) = (0.5 * (b.x[0] + b.x[1]), 0.5 * (b.y[0] + b.y[1]));
+        assert_eq!(scene.ground(x, y), b.top);
+        assert!(hf.height(x, y) <= b.top - FLAT_BOX_CLEARANCE + 1e-6);
+    }
+    // without boxes, flat tiles keep their roughness in the heightfield
+    let c = cfg(&["env.n_envs=1", "env.terrain.flat_boxes=false"]);
+    let scene = Scene::build(&c.env).unwrap();
+    assert!(scene.flat_boxes.is_empty());
+}

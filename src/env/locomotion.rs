@@ -136,7 +136,10 @@ impl LocoEnv {
     pub fn reset(&mut self, sh: &EnvShared) {
         let g1 = &sh.scene.g1;
         self.spawn = match &sh.scene.terrain {
-            Some(map) => map.spawn(self.level, self.col),
+            Some(map) => {
+                let [x, y, _] = map.spawn(self.level, self.col);
+                [x, y, sh.scene.ground(x, y)]
+            }
             None => [0.0, 0.0, 0.0],
         };
         self.goal_x = match &sh.scene.terrain {

@@ -10,7 +10,7 @@ use super::EnvError;
 use crate::config::{EnvConfig, TerrainMode};
 use crate::robot::{self, G1};
 use crate::sim::{HeightField, Model, ObjType};
-use crate::terrain::TerrainMap;
+use crate::terrain::{TerrainKind, TerrainMap};
 
 /// What a body is, for contact bookkeeping.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -42,6 +42,20 @@ impl Default for BucketParams {
     }
 }
 
+/// A Flat tile served by a box geom (plane-speed contacts) instead of the
+/// heightfield; the heightfield under it is lowered by [`FLAT_BOX_CLEARANCE`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FlatBox {
+    pub x: [f64; 2],
+    pub y: [f64; 2],
+    /// Height of the walking surface (the map's ground level).
+    pub top: f64,
+}
+
+/// How far the heightfield is lowered under a flat box (m): enough for MuJoCo's
+/// prism height test to skip every prism under a foot standing on the box.
+pub const FLAT_BOX_CLEARANCE: f64 = 0.01;
+
 /// The scene shared by all envs of a batch.
 pub struct Scene {
     /// One compiled model per domain-randomization bucket (index = bucket).
@@ -54,6 +68,8 @@ pub struct Scene {
     pub body_class: Vec<BodyClass>,
     /// Robot weight (N) of the nominal model, for normalizing forces.
     pub robot_weight: f64,
+    /// Flat tiles served by boxes (empty on a plane or with `flat_boxes: false`).
+    pub flat_boxes: Vec<FlatBox>,
 }
 
 impl Scene {
@@ -76,7 +92,11 @@ impl Scene {
         cfg: &EnvConfig,
         terrain: Option<Arc<TerrainMap>>,
     ) -> Result<Scene, EnvError> {
-        let xml = scene_xml(cfg, terrain.as_deref());
+        let flat_boxes = match (&terrain, cfg.terrain.flat_boxes) {
+            (Some(map), true) => flat_tiles(map),
+            _ => Vec::new(),
+        };
+        let xml = scene_xml(cfg, terrain.as_deref(), &flat_boxes);
         let dir = robot::models_dir().join("g1");
         let mut model = Model::from_xml_str(&xml, &dir, "generated G1 scene")?;
         robot::apply_armature(&mut model)?;
@@ -85,7 +105,7 @@ impl Scene {
         let heights = match &terrain {
             Some(map) => {
                 let hid = model.geom_dataid()[terrain_geom] as usize;
-                model.set_hfield_data(hid, &map.hfield_data())?;
+                model.set_hfield_data(hid, &lowered_under_boxes(map, &flat_boxes))?;
                 Some(Arc::new(HeightField::from_model(&model, terrain_geom)?))
             }
             None => None,
@@ -129,19 +149,26 @@ impl Scene {
             heights,
             body_class,
             robot_weight,
+            flat_boxes,
         })
     }
 
     /// Terrain height at a world point (0 on a plane).
     #[inline]
     pub fn ground(&self, x: f64, y: f64) -> f64 {
-        self.heights.as_ref().map_or(0.0, |h| h.height(x, y))
+        let h = self.heights.as_ref().map_or(0.0, |h| h.height(x, y));
+        for b in &self.flat_boxes {
+            if x >= b.x[0] && x <= b.x[1] && y >= b.y[0] && y <= b.y[1] {
+                return h.max(b.top);
+            }
+        }
+        h
     }
 }
 
 /// The scene's MJCF: our G1 (`g1_actuators.xml`, included relative to
 /// `models/g1/`, where the generated file is written) on a plane or a heightfield.
-pub fn scene_xml(cfg: &EnvConfig, terrain: Option<&TerrainMap>) -> String {
+pub fn scene_xml(cfg: &EnvConfig, terrain: Option<&TerrainMap>, boxes: &[FlatBox]) -> String {
     let (asset, ground) = match terrain {
         None => (
             String::new(),
@@ -151,15 +178,26 @@ pub fn scene_xml(cfg: &EnvConfig, terrain: Option<&TerrainMap>) -> String {
         Some(map) => {
             let (size, pos) = (map.hfield_size(), map.hfield_pos());
             let (nrow, ncol) = map.hfield_shape();
+            let mut geoms = format!(
+                r#"<geom name="terrain" type="hfield" hfield="terrain" pos="{} {} {}" contype="1" conaffinity="1" condim="3"/>"#,
+                pos[0], pos[1], pos[2]
+            );
+            for (k, b) in boxes.iter().enumerate() {
+                geoms.push_str(&format!(
+                    "\n    <geom name=\"flat_box_{k}\" type=\"box\" pos=\"{} {} {}\" size=\"{} {} 0.5\" contype=\"1\" conaffinity=\"1\" condim=\"3\" rgba=\"0.35 0.45 0.55 1\"/>",
+                    0.5 * (b.x[0] + b.x[1]),
+                    0.5 * (b.y[0] + b.y[1]),
+                    b.top - 0.5,
+                    0.5 * (b.x[1] - b.x[0]),
+                    0.5 * (b.y[1] - b.y[0]),
+                ));
+            }
             (
                 format!(
                     r#"<asset><hfield name="terrain" nrow="{nrow}" ncol="{ncol}" size="{} {} {} {}"/></asset>"#,
                     size[0], size[1], size[2], size[3]
                 ),
-                format!(
-                    r#"<geom name="terrain" type="hfield" hfield="terrain" pos="{} {} {}" contype="1" conaffinity="1" condim="3"/>"#,
-                    pos[0], pos[1], pos[2]
-                ),
+                geoms,
             )
         }
     };
@@ -176,6 +214,50 @@ pub fn scene_xml(cfg: &EnvConfig, terrain: Option<&TerrainMap>) -> String {
         dt = cfg.sim.timestep,
         integrator = cfg.sim.integrator.mjcf()
     )
+}
+
+/// The Flat tiles of a map, as box tops at the map's ground level (0).
+fn flat_tiles(map: &TerrainMap) -> Vec<FlatBox> {
+    let mut boxes = Vec::new();
+    for col in 0..map.num_cols() {
+        if map.tile_kind(col) != TerrainKind::Flat {
+            continue;
+        }
+        for level in 0..map.num_levels() {
+            let b = map.tile_bounds(level, col);
+            boxes.push(FlatBox {
+                x: b.x,
+                y: b.y,
+                top: 0.0,
+            });
+        }
+    }
+    boxes
+}
+
+/// The map's normalized heightfield data, lowered to `top - FLAT_BOX_CLEARANCE`
+/// wherever a flat box covers it (box edges included).
+fn lowered_under_boxes(map: &TerrainMap, boxes: &[FlatBox]) -> Vec<f32> {
+    let mut data = map.hfield_data();
+    if boxes.is_empty() {
+        return data;
+    }
+    let (nrow, ncol) = map.hfield_shape();
+    let (size, pos) = (map.hfield_size(), map.hfield_pos());
+    let hs = map.horizontal_scale();
+    for b in boxes {
+        let limit = (((b.top - FLAT_BOX_CLEARANCE - pos[2]) / size[2]).clamp(0.0, 1.0)) as f32;
+        let i0 = (b.x[0] / hs).floor().max(0.0) as usize;
+        let i1 = ((b.x[1] / hs).ceil() as usize).min(ncol - 1);
+        let j0 = (b.y[0] / hs).floor().max(0.0) as usize;
+        let j1 = ((b.y[1] / hs).ceil() as usize).min(nrow - 1);
+        for j in j0..=j1 {
+            for v in &mut data[j * ncol + i0..=j * ncol + i1] {
+                *v = v.min(limit);
+            }
+        }
+    }
+    data
 }
 
 /// Robot geoms: only the feet keep condim 3 (others frictionless, condim 1, as in
