@@ -136,8 +136,13 @@ pub fn env(
     }
     let physics = (n * control_steps * dec) as f64;
 
-    // scandots: direct lookup vs one mj_ray per point, over the same points
-    let env0 = &v1.envs()[0];
+    // scandots: direct lookup vs one mj_ray per point, over the same points, on
+    // an env that stands on the heightfield (if any; Flat-column envs use a plane)
+    let env0 = v1
+        .envs()
+        .iter()
+        .find(|e| !e.on_plane())
+        .unwrap_or(&v1.envs()[0]);
     let data = env0.data();
     let base = env0.state().base_pos;
     let points: Vec<(f64, f64)> = (0..200 * obs::SCAN_DIM)

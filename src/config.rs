@@ -86,6 +86,12 @@ pub struct SimConfig {
     pub self_collisions: bool,
     /// MuJoCo integrator; `implicitfast` exists only in MuJoCo 3.x.
     pub integrator: Integrator,
+    /// Contact buffer size (`<size nconmax>`). MuJoCo 2.2.2's default of 100 overflows
+    /// when a G1 lies on a heightfield (every foot capsule meets several prisms);
+    /// an overflow drops contacts and is counted as a warning.
+    pub nconmax: usize,
+    /// Constraint rows (`<size njmax>`); 2.2.2 allocates njmax^2 doubles per env.
+    pub njmax: usize,
 }
 
 /// MuJoCo's integrators, by their MJCF names.
@@ -118,6 +124,8 @@ impl Default for SimConfig {
             max_qvel: 100.0,
             self_collisions: false,
             integrator: Integrator::Implicit,
+            nconmax: 300,
+            njmax: 1200,
         }
     }
 }
@@ -359,11 +367,11 @@ pub struct TerrainSetting {
     /// Seed of the terrain map (kept apart from the env seed so that runs with
     /// different env seeds can share a map).
     pub seed: u64,
-    /// Serve Flat tiles with box geoms instead of the heightfield: MuJoCo collides
-    /// feet with a heightfield prism by prism, about 2x slower than with a plane
-    /// even when flat (README, "Benchmarks"); a box is as fast as a plane. Flat
-    /// tiles then have no base roughness.
-    pub flat_boxes: bool,
+    /// Envs bound to a Flat column run on a plane instead of the heightfield:
+    /// MuJoCo collides feet with a heightfield prism by prism, about 2x slower
+    /// than with a plane even when flat (README, "Benchmarks"). Their flat tiles
+    /// then have no base roughness.
+    pub flat_on_plane: bool,
 }
 
 impl Default for TerrainSetting {
@@ -374,7 +382,7 @@ impl Default for TerrainSetting {
             curriculum: true,
             init_max_level: 2,
             seed: 0,
-            flat_boxes: true,
+            flat_on_plane: true,
         }
     }
 }

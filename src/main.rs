@@ -91,9 +91,10 @@ enum BenchCommand {
         #[arg(long = "set")]
         sets: Vec<String>,
         /// Control steps per round.
-        #[arg(long, default_value_t = 100)]
+        #[arg(long, default_value_t = 200)]
         steps: usize,
-        #[arg(long, default_value_t = 3)]
+        /// Alternating rounds (raw, 1 thread, 2 threads); the best of each counts.
+        #[arg(long, default_value_t = 5)]
         rounds: usize,
     },
 }

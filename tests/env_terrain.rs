@@ -23,6 +23,7 @@ fn scandots_match_mj_ray() {
     for _ in 0..5 {
         v.step(&zeros);
     }
+    // the ground geom (heightfield, or the plane of Flat-column envs) is group 0
     let only_ground = [1u8, 0, 0, 0, 0, 0];
     let mut worst: f64 = 0.0;
     let mut varied = 0.0f64;
@@ -54,15 +55,21 @@ fn scandots_match_mj_ray() {
     assert!(varied > 0.05, "some scan sees terrain relief");
 }
 
-fn teleport(v: &mut VecEnv, i: usize, dx: f64, height: f64) {
+/// Move env `i`'s robot `dx` along x, `height` above the ground; `fallen` lays it
+/// on its side (a fall that the next step reports whatever the ground).
+fn teleport(v: &mut VecEnv, i: usize, dx: f64, height: f64, fallen: bool) {
     let (x, y) = {
         let p = v.envs()[i].state().base_pos;
         (p[0] + dx, p[1])
     };
-    let ground = v.shared().scene.ground(x, y);
+    let ground = v.envs()[i].ground(v.shared(), x, y);
     let d = v.data_mut(i).unwrap();
     d.qpos_mut()[0] = x;
     d.qpos_mut()[2] = ground + height;
+    if fallen {
+        let h = std::f64::consts::FRAC_1_SQRT_2;
+        d.qpos_mut()[3..7].copy_from_slice(&[h, h, 0.0, 0.0]);
+    }
     d.forward();
 }
 
@@ -74,10 +81,14 @@ fn curriculum_promotes_walkers_and_demotes_fallers() {
     v.step(&zeros);
     let before: Vec<usize> = v.envs().iter().map(|e| e.terrain_level()).collect();
     // env 0 "walked" 5 m (more than half a tile) before falling; env 1 fell where it stood
-    teleport(&mut v, 0, 5.0, 0.1);
-    teleport(&mut v, 1, 0.0, 0.1);
+    teleport(&mut v, 0, 5.0, 0.3, true);
+    teleport(&mut v, 1, 0.0, 0.3, true);
     v.step(&zeros);
-    assert!(v.outcomes[0].terminated && v.outcomes[1].terminated);
+    assert!(
+        v.outcomes[0].terminated && v.outcomes[1].terminated,
+        "{:?}",
+        &v.outcomes[..2]
+    );
     assert!(!v.outcomes[2].episode_done && !v.outcomes[3].episode_done);
     let after: Vec<usize> = v.envs().iter().map(|e| e.terrain_level()).collect();
     assert_eq!(after[0], before[0] + 1, "promoted");
@@ -97,7 +108,7 @@ fn leaving_the_map_truncates_without_terminating() {
     let zeros = vec![0.0f32; 2 * NUM_JOINTS];
     v.step(&zeros);
     let x = v.envs()[0].state().base_pos[0];
-    teleport(&mut v, 0, 0.5 - x, 0.8); // x = 0.5 m: inside the 1 m margin
+    teleport(&mut v, 0, 0.5 - x, 0.8, false); // x = 0.5 m: inside the 1 m margin
     v.step(&zeros);
     assert!(v.outcomes[0].truncated && !v.outcomes[0].terminated);
     // the final observation is the one before the reset: upright, at the map's edge
@@ -129,24 +140,49 @@ fn terrain_config_errors_are_clear() {
 }
 
 #[test]
-fn flat_tiles_are_boxes_over_a_lowered_heightfield() {
-    use dreampolicy::env::scene::{Scene, FLAT_BOX_CLEARANCE};
+fn envs_on_flat_columns_step_on_a_plane() {
     use dreampolicy::terrain::TerrainKind;
-    let c = cfg(&["env.n_envs=1"]);
-    let scene = Scene::build(&c.env).unwrap();
-    let map = scene.terrain.as_ref().unwrap();
-    let flat_cols = (0..map.num_cols())
-        .filter(|&k| map.tile_kind(k) == TerrainKind::Flat)
-        .count();
-    assert_eq!(scene.flat_boxes.len(), flat_cols * map.num_levels());
-    let hf = scene.heights.as_ref().unwrap();
-    for b in &scene.flat_boxes {
-        let (x, y) = (0.5 * (b.x[0] + b.x[1]), 0.5 * (b.y[0] + b.y[1]));
-        assert_eq!(scene.ground(x, y), b.top);
-        assert!(hf.height(x, y) <= b.top - FLAT_BOX_CLEARANCE + 1e-6);
+    let c = cfg(&["env.n_envs=5"]);
+    let mut v = VecEnv::new(&c.env).unwrap();
+    let map = v.shared().scene.terrain.clone().unwrap();
+    v.step(&vec![0.0f32; 5 * NUM_JOINTS]);
+    for (i, env) in v.envs().iter().enumerate() {
+        let flat = map.tile_kind(i % map.num_cols()) == TerrainKind::Flat;
+        assert_eq!(env.on_plane(), flat, "env {i}");
+        let st = env.state();
+        if flat {
+            // the plane is the ground: physics, height above ground and scandots agree
+            let m = env.data().model();
+            let g = m.id(dreampolicy::sim::ObjType::Geom, "terrain").unwrap();
+            assert_eq!(m.geom_type()[g], mujoco_sys::mjGEOM_PLANE as i32);
+            let (dist, geom) = env
+                .data()
+                .ray(
+                    [st.base_pos[0], st.base_pos[1], 3.0],
+                    [0.0, 0.0, -1.0],
+                    Some(&[1, 0, 0, 0, 0, 0]),
+                    true,
+                    None,
+                )
+                .unwrap();
+            assert_eq!(
+                env.data()
+                    .model()
+                    .id2name(dreampolicy::sim::ObjType::Geom, geom),
+                Some("terrain")
+            );
+            assert!((3.0 - dist).abs() < 1e-9);
+            assert!((st.base_height - st.base_pos[2]).abs() < 1e-12);
+            let scan = &v.scan[i * SCAN_DIM..(i + 1) * SCAN_DIM];
+            assert!(scan
+                .iter()
+                .all(|h| (*h as f64 + st.base_pos[2]).abs() < 1e-5));
+        }
     }
-    // without boxes, flat tiles keep their roughness in the heightfield
-    let c = cfg(&["env.n_envs=1", "env.terrain.flat_boxes=false"]);
-    let scene = Scene::build(&c.env).unwrap();
-    assert!(scene.flat_boxes.is_empty());
+    assert!(v.envs().iter().any(|e| e.on_plane()) && v.envs().iter().any(|e| !e.on_plane()));
+    // off: every env steps on the heightfield
+    let c = cfg(&["env.n_envs=5", "env.terrain.flat_on_plane=false"]);
+    let v = VecEnv::new(&c.env).unwrap();
+    assert!(v.envs().iter().all(|e| !e.on_plane()));
+    assert!(v.shared().scene.plane_models.is_empty());
 }

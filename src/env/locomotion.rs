@@ -46,6 +46,8 @@ pub struct LocoEnv {
     goal_x: f64,
     past_goal: bool,
     fatal_contact: bool,
+    /// Bound to a Flat column and stepping on the plane models (scene doc).
+    on_plane: bool,
 }
 
 /// Where one env writes its outputs (its rows of the batch buffers).
@@ -63,9 +65,6 @@ impl LocoEnv {
     pub fn new(sh: &EnvShared, index: usize, seed: u64) -> Result<LocoEnv, SimError> {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let bucket = rng.random_range(0..sh.scene.models.len());
-        let mut data = Data::new(sh.scene.models[bucket].clone())?;
-        data.set_max_qvel(sh.cfg.sim.max_qvel);
-        let g1 = &sh.scene.g1;
         let (level, col) = match &sh.scene.terrain {
             Some(map) => (
                 rng.random_range(0..=sh.cfg.terrain.init_max_level.min(map.num_levels() - 1)),
@@ -73,6 +72,15 @@ impl LocoEnv {
             ),
             None => (0, 0),
         };
+        let on_plane = sh.scene.column_on_plane(col);
+        let model = if on_plane {
+            &sh.scene.plane_models[bucket]
+        } else {
+            &sh.scene.models[bucket]
+        };
+        let mut data = Data::new(model.clone())?;
+        data.set_max_qvel(sh.cfg.sim.max_qvel);
+        let g1 = &sh.scene.g1;
         let mut env = LocoEnv {
             data,
             bucket,
@@ -89,6 +97,7 @@ impl LocoEnv {
             goal_x: f64::INFINITY,
             past_goal: false,
             fatal_contact: false,
+            on_plane,
         };
         env.reset(sh);
         Ok(env)
@@ -138,7 +147,7 @@ impl LocoEnv {
         self.spawn = match &sh.scene.terrain {
             Some(map) => {
                 let [x, y, _] = map.spawn(self.level, self.col);
-                [x, y, sh.scene.ground(x, y)]
+                [x, y, self.ground(sh, x, y)]
             }
             None => [0.0, 0.0, 0.0],
         };
@@ -308,9 +317,26 @@ impl LocoEnv {
 }
 
 impl LocoEnv {
+    /// Height of the ground this env's physics sees.
+    #[inline]
+    pub fn ground(&self, sh: &EnvShared, x: f64, y: f64) -> f64 {
+        if self.on_plane {
+            0.0
+        } else {
+            sh.scene.ground(x, y)
+        }
+    }
+
+    /// Whether this env runs on a plane in place of its Flat tiles (scene doc).
+    pub fn on_plane(&self) -> bool {
+        self.on_plane
+    }
+
     /// Read the MuJoCo state into `self.state` (step 4 of the step order).
     fn derive_state(&mut self, sh: &EnvShared) {
         let scene = &sh.scene;
+        let on_plane = self.on_plane;
+        let ground = |x: f64, y: f64| if on_plane { 0.0 } else { scene.ground(x, y) };
         let g1 = &scene.g1;
         let d = &self.data;
         let s = &mut self.state;
@@ -323,7 +349,7 @@ impl LocoEnv {
         s.base_ang_vel = [qvel[3], qvel[4], qvel[5]];
         s.gravity = rotate_inv(&s.base_rot, [0.0, 0.0, -1.0]);
         s.yaw = s.base_rot[3].atan2(s.base_rot[0]);
-        s.base_height = s.base_pos[2] - scene.ground(s.base_pos[0], s.base_pos[1]);
+        s.base_height = s.base_pos[2] - ground(s.base_pos[0], s.base_pos[1]);
         let force = d.actuator_force();
         for i in 0..NUM_JOINTS {
             s.q[i] = qpos[g1.qpos_adr[i]];
@@ -335,11 +361,12 @@ impl LocoEnv {
         for f in 0..2 {
             s.feet_pos[f] = xpos[g1.feet[f]];
             s.feet_rpy[f] = rpy(&xmat[g1.feet[f]]);
-            s.feet_ground[f] = scene.ground(s.feet_pos[f][0], s.feet_pos[f][1]);
-            s.feet_on_edge[f] = scene
-                .terrain
-                .as_ref()
-                .is_some_and(|m| m.is_edge(s.feet_pos[f][0], s.feet_pos[f][1]));
+            s.feet_ground[f] = ground(s.feet_pos[f][0], s.feet_pos[f][1]);
+            s.feet_on_edge[f] = !on_plane
+                && scene
+                    .terrain
+                    .as_ref()
+                    .is_some_and(|m| m.is_edge(s.feet_pos[f][0], s.feet_pos[f][1]));
             s.knees_pos[f] = xpos[g1.knees[f]];
         }
 
@@ -521,7 +548,7 @@ impl LocoEnv {
             let (px, py) = obs::scan_point(k);
             let x = s.base_pos[0] + cy * px - sy * py;
             let y = s.base_pos[1] + sy * px + cy * py;
-            let rel = (sh.scene.ground(x, y) - s.base_pos[2]).clamp(-oc.scan_clip, oc.scan_clip);
+            let rel = (self.ground(sh, x, y) - s.base_pos[2]).clamp(-oc.scan_clip, oc.scan_clip);
             let e = if noise > 0.0 {
                 self.rng.random_range(-noise..=noise)
             } else {

@@ -1,6 +1,14 @@
 //! The compiled scene an env batch shares: the G1 on a plane or on the terrain
 //! map's heightfield, the model buckets of domain randomization, and the body
 //! classes used to read contacts.
+//!
+//! Flat tiles on a plane: MuJoCo collides a foot with a heightfield prism by
+//! prism, so even a flat heightfield steps about 2x slower than a plane (README,
+//! "Benchmarks"). Envs bound to a Flat column of the map therefore run on a
+//! second set of bucket models, compiled from the same scene with a plane at
+//! ground level in place of the heightfield: they step at plane speed, and their
+//! ground lookups, scandots and edges read that plane too. (Flat tiles lose their
+//! base roughness for those envs; `terrain.flat_on_plane: false` keeps it.)
 use std::sync::Arc;
 
 use rand::{Rng, SeedableRng};
@@ -42,20 +50,6 @@ impl Default for BucketParams {
     }
 }
 
-/// A Flat tile served by a box geom (plane-speed contacts) instead of the
-/// heightfield; the heightfield under it is lowered by [`FLAT_BOX_CLEARANCE`].
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct FlatBox {
-    pub x: [f64; 2],
-    pub y: [f64; 2],
-    /// Height of the walking surface (the map's ground level).
-    pub top: f64,
-}
-
-/// How far the heightfield is lowered under a flat box (m): enough for MuJoCo's
-/// prism height test to skip every prism under a foot standing on the box.
-pub const FLAT_BOX_CLEARANCE: f64 = 0.01;
-
 /// The scene shared by all envs of a batch.
 pub struct Scene {
     /// One compiled model per domain-randomization bucket (index = bucket).
@@ -68,8 +62,9 @@ pub struct Scene {
     pub body_class: Vec<BodyClass>,
     /// Robot weight (N) of the nominal model, for normalizing forces.
     pub robot_weight: f64,
-    /// Flat tiles served by boxes (empty on a plane or with `flat_boxes: false`).
-    pub flat_boxes: Vec<FlatBox>,
+    /// Bucket models for envs that live on Flat columns: heightfield off, plane on
+    /// (empty unless `terrain.flat_on_plane` and the map has a Flat column).
+    pub plane_models: Vec<Arc<Model>>,
 }
 
 impl Scene {
@@ -92,55 +87,49 @@ impl Scene {
         cfg: &EnvConfig,
         terrain: Option<Arc<TerrainMap>>,
     ) -> Result<Scene, EnvError> {
-        let flat_boxes = match (&terrain, cfg.terrain.flat_boxes) {
-            (Some(map), true) => flat_tiles(map),
-            _ => Vec::new(),
-        };
-        let xml = scene_xml(cfg, terrain.as_deref(), &flat_boxes);
-        let dir = robot::models_dir().join("g1");
-        let mut model = Model::from_xml_str(&xml, &dir, "generated G1 scene")?;
-        robot::apply_armature(&mut model)?;
-        let g1 = G1::resolve(&model)?;
-        let terrain_geom = model.id(ObjType::Geom, "terrain")?;
+        let (model, g1) = compile(cfg, terrain.as_deref())?;
         let heights = match &terrain {
-            Some(map) => {
-                let hid = model.geom_dataid()[terrain_geom] as usize;
-                model.set_hfield_data(hid, &lowered_under_boxes(map, &flat_boxes))?;
-                Some(Arc::new(HeightField::from_model(&model, terrain_geom)?))
+            Some(_) => {
+                let geom = model.id(ObjType::Geom, "terrain")?;
+                Some(Arc::new(HeightField::from_model(&model, geom)?))
             }
             None => None,
         };
-        configure_collisions(&mut model, &g1, cfg.sim.self_collisions);
         let body_class = classify_bodies(&model, &g1, &cfg.termination.contact_bodies)?;
         let robot_weight = model.body_subtreemass()[g1.pelvis] * 9.81;
+        // envs on Flat columns step on a scene compiled with a plane instead
+        let plane = match &terrain {
+            Some(m)
+                if cfg.terrain.flat_on_plane
+                    && (0..m.num_cols()).any(|c| m.tile_kind(c) == TerrainKind::Flat) =>
+            {
+                Some(compile(cfg, None)?.0)
+            }
+            _ => None,
+        };
 
         let dr = &cfg.domain_rand;
         let n_buckets = if dr.enabled { dr.model_buckets } else { 1 };
         let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x00B0_C4E7);
-        let mut models = Vec::with_capacity(n_buckets);
-        let mut buckets = Vec::with_capacity(n_buckets);
-        let mut nominal = Some(model);
-        for b in 0..n_buckets {
-            let params = if dr.enabled {
-                BucketParams {
-                    friction: rng.random_range(dr.friction[0]..=dr.friction[1]),
-                    added_mass: rng.random_range(dr.added_mass[0]..=dr.added_mass[1]),
-                    motor_strength: rng.random_range(dr.motor_strength[0]..=dr.motor_strength[1]),
+        let buckets: Vec<BucketParams> = (0..n_buckets)
+            .map(|_| {
+                if dr.enabled {
+                    BucketParams {
+                        friction: rng.random_range(dr.friction[0]..=dr.friction[1]),
+                        added_mass: rng.random_range(dr.added_mass[0]..=dr.added_mass[1]),
+                        motor_strength: rng
+                            .random_range(dr.motor_strength[0]..=dr.motor_strength[1]),
+                    }
+                } else {
+                    BucketParams::default()
                 }
-            } else {
-                BucketParams::default()
-            };
-            // the last bucket takes the nominal model itself, the others copies
-            let mut m = match (b + 1 == n_buckets, nominal.as_ref()) {
-                (false, Some(nom)) => nom.clone(),
-                _ => nominal
-                    .take()
-                    .expect("nominal model taken once, by the last bucket"),
-            };
-            apply_bucket(&mut m, &g1, &params)?;
-            models.push(Arc::new(m));
-            buckets.push(params);
-        }
+            })
+            .collect();
+        let models = bucket_models(model, &g1, &buckets)?;
+        let plane_models = match plane {
+            Some(p) => bucket_models(p, &g1, &buckets)?,
+            None => Vec::new(),
+        };
         Ok(Scene {
             models,
             buckets,
@@ -149,26 +138,29 @@ impl Scene {
             heights,
             body_class,
             robot_weight,
-            flat_boxes,
+            plane_models,
         })
     }
 
     /// Terrain height at a world point (0 on a plane).
     #[inline]
     pub fn ground(&self, x: f64, y: f64) -> f64 {
-        let h = self.heights.as_ref().map_or(0.0, |h| h.height(x, y));
-        for b in &self.flat_boxes {
-            if x >= b.x[0] && x <= b.x[1] && y >= b.y[0] && y <= b.y[1] {
-                return h.max(b.top);
-            }
-        }
-        h
+        self.heights.as_ref().map_or(0.0, |h| h.height(x, y))
+    }
+
+    /// Whether the env bound to map column `col` runs on the plane models.
+    pub fn column_on_plane(&self, col: usize) -> bool {
+        !self.plane_models.is_empty()
+            && self
+                .terrain
+                .as_ref()
+                .is_some_and(|m| m.tile_kind(col) == TerrainKind::Flat)
     }
 }
 
 /// The scene's MJCF: our G1 (`g1_actuators.xml`, included relative to
 /// `models/g1/`, where the generated file is written) on a plane or a heightfield.
-pub fn scene_xml(cfg: &EnvConfig, terrain: Option<&TerrainMap>, boxes: &[FlatBox]) -> String {
+pub fn scene_xml(cfg: &EnvConfig, terrain: Option<&TerrainMap>) -> String {
     let (asset, ground) = match terrain {
         None => (
             String::new(),
@@ -178,26 +170,15 @@ pub fn scene_xml(cfg: &EnvConfig, terrain: Option<&TerrainMap>, boxes: &[FlatBox
         Some(map) => {
             let (size, pos) = (map.hfield_size(), map.hfield_pos());
             let (nrow, ncol) = map.hfield_shape();
-            let mut geoms = format!(
-                r#"<geom name="terrain" type="hfield" hfield="terrain" pos="{} {} {}" contype="1" conaffinity="1" condim="3"/>"#,
-                pos[0], pos[1], pos[2]
-            );
-            for (k, b) in boxes.iter().enumerate() {
-                geoms.push_str(&format!(
-                    "\n    <geom name=\"flat_box_{k}\" type=\"box\" pos=\"{} {} {}\" size=\"{} {} 0.5\" contype=\"1\" conaffinity=\"1\" condim=\"3\" rgba=\"0.35 0.45 0.55 1\"/>",
-                    0.5 * (b.x[0] + b.x[1]),
-                    0.5 * (b.y[0] + b.y[1]),
-                    b.top - 0.5,
-                    0.5 * (b.x[1] - b.x[0]),
-                    0.5 * (b.y[1] - b.y[0]),
-                ));
-            }
             (
                 format!(
                     r#"<asset><hfield name="terrain" nrow="{nrow}" ncol="{ncol}" size="{} {} {} {}"/></asset>"#,
                     size[0], size[1], size[2], size[3]
                 ),
-                geoms,
+                format!(
+                    r#"<geom name="terrain" type="hfield" hfield="terrain" pos="{} {} {}" contype="1" conaffinity="1" condim="3"/>"#,
+                    pos[0], pos[1], pos[2]
+                ),
             )
         }
     };
@@ -205,6 +186,7 @@ pub fn scene_xml(cfg: &EnvConfig, terrain: Option<&TerrainMap>, boxes: &[FlatBox
         r#"<mujoco model="g1_dreampolicy">
   <include file="g1_actuators.xml"/>
   <option timestep="{dt}" integrator="{integrator}"/>
+  <size nconmax="{nconmax}" njmax="{njmax}"/>
   {asset}
   <worldbody>
     {ground}
@@ -212,52 +194,49 @@ pub fn scene_xml(cfg: &EnvConfig, terrain: Option<&TerrainMap>, boxes: &[FlatBox
 </mujoco>
 "#,
         dt = cfg.sim.timestep,
-        integrator = cfg.sim.integrator.mjcf()
+        integrator = cfg.sim.integrator.mjcf(),
+        nconmax = cfg.sim.nconmax,
+        njmax = cfg.sim.njmax,
     )
 }
 
-/// The Flat tiles of a map, as box tops at the map's ground level (0).
-fn flat_tiles(map: &TerrainMap) -> Vec<FlatBox> {
-    let mut boxes = Vec::new();
-    for col in 0..map.num_cols() {
-        if map.tile_kind(col) != TerrainKind::Flat {
-            continue;
-        }
-        for level in 0..map.num_levels() {
-            let b = map.tile_bounds(level, col);
-            boxes.push(FlatBox {
-                x: b.x,
-                y: b.y,
-                top: 0.0,
-            });
-        }
+/// Compile the scene of `cfg` on `terrain` (heightfield data uploaded, armature
+/// and collision settings applied): the nominal model of the buckets.
+fn compile(cfg: &EnvConfig, terrain: Option<&TerrainMap>) -> Result<(Model, G1), EnvError> {
+    let xml = scene_xml(cfg, terrain);
+    let dir = robot::models_dir().join("g1");
+    let mut model = Model::from_xml_str(&xml, &dir, "generated G1 scene")?;
+    robot::apply_armature(&mut model)?;
+    let g1 = G1::resolve(&model)?;
+    if let Some(map) = terrain {
+        let geom = model.id(ObjType::Geom, "terrain")?;
+        let hid = model.geom_dataid()[geom] as usize;
+        model.set_hfield_data(hid, &map.hfield_data())?;
     }
-    boxes
+    configure_collisions(&mut model, &g1, cfg.sim.self_collisions);
+    Ok((model, g1))
 }
 
-/// The map's normalized heightfield data, lowered to `top - FLAT_BOX_CLEARANCE`
-/// wherever a flat box covers it (box edges included).
-fn lowered_under_boxes(map: &TerrainMap, boxes: &[FlatBox]) -> Vec<f32> {
-    let mut data = map.hfield_data();
-    if boxes.is_empty() {
-        return data;
+/// One model per bucket: copies of `nominal` (the last bucket takes it) with the
+/// bucket's parameters written in.
+fn bucket_models(
+    nominal: Model,
+    g1: &G1,
+    buckets: &[BucketParams],
+) -> Result<Vec<Arc<Model>>, EnvError> {
+    let mut nominal = Some(nominal);
+    let mut models = Vec::with_capacity(buckets.len());
+    for (b, params) in buckets.iter().enumerate() {
+        let mut m = match (b + 1 == buckets.len(), nominal.as_ref()) {
+            (false, Some(nom)) => nom.clone(),
+            _ => nominal
+                .take()
+                .expect("nominal model taken once, by the last bucket"),
+        };
+        apply_bucket(&mut m, g1, params)?;
+        models.push(Arc::new(m));
     }
-    let (nrow, ncol) = map.hfield_shape();
-    let (size, pos) = (map.hfield_size(), map.hfield_pos());
-    let hs = map.horizontal_scale();
-    for b in boxes {
-        let limit = (((b.top - FLAT_BOX_CLEARANCE - pos[2]) / size[2]).clamp(0.0, 1.0)) as f32;
-        let i0 = (b.x[0] / hs).floor().max(0.0) as usize;
-        let i1 = ((b.x[1] / hs).ceil() as usize).min(ncol - 1);
-        let j0 = (b.y[0] / hs).floor().max(0.0) as usize;
-        let j1 = ((b.y[1] / hs).ceil() as usize).min(nrow - 1);
-        for j in j0..=j1 {
-            for v in &mut data[j * ncol + i0..=j * ncol + i1] {
-                *v = v.min(limit);
-            }
-        }
-    }
-    data
+    Ok(models)
 }
 
 /// Robot geoms: only the feet keep condim 3 (others frictionless, condim 1, as in

@@ -31,12 +31,15 @@ pub struct VecEnv {
     pub final_scan: Vec<f32>,
     /// Per-env outcome of the last step.
     pub outcomes: Vec<Outcome>,
+    warnings_seen: u64,
 }
 
 /// Batch-level summary of one step.
 #[derive(Debug, Clone, Default)]
 pub struct StepInfo {
     pub blowups: usize,
+    /// MuJoCo warnings raised during this step (contact buffer full, ...), all envs.
+    pub warnings: u64,
     pub episodes_done: usize,
     pub mean_reward: f64,
 }
@@ -74,6 +77,7 @@ impl VecEnv {
             final_critic: vec![0.0; n * CRITIC_DIM],
             final_scan: vec![0.0; n * SCAN_DIM],
             outcomes: vec![Outcome::default(); n],
+            warnings_seen: 0,
         };
         v.reset_all();
         Ok(v)
@@ -147,6 +151,9 @@ impl VecEnv {
                 );
         });
         let mut info = StepInfo::default();
+        let total = self.warning_total();
+        info.warnings = total - self.warnings_seen;
+        self.warnings_seen = total;
         for o in &self.outcomes {
             info.blowups += o.blowup as usize;
             info.episodes_done += o.episode_done as usize;
@@ -194,6 +201,14 @@ impl VecEnv {
             }
         }
         control_steps * ptrs.len() * decimation
+    }
+
+    /// MuJoCo warnings counted by all envs since construction.
+    pub fn warning_total(&self) -> u64 {
+        self.envs
+            .iter()
+            .map(|e| e.data().warning_totals().iter().sum::<u64>())
+            .sum()
     }
 
     /// Mean terrain level of the batch.

@@ -16,7 +16,9 @@ use std::sync::{Mutex, Once};
 
 static INSTALL: Once = Once::new();
 static WARNINGS: AtomicU64 = AtomicU64::new(0);
-static LAST_WARNING: Mutex<String> = Mutex::new(String::new());
+/// The last warning's text, truncated to a fixed buffer: the handler runs inside
+/// `mj_step` and must not allocate.
+static LAST_WARNING: Mutex<([u8; 256], usize)> = Mutex::new(([0; 256], 0));
 
 fn message(msg: *const c_char) -> String {
     if msg.is_null() {
@@ -39,8 +41,15 @@ extern "C" fn on_error(msg: *const c_char) {
 
 extern "C" fn on_warning(msg: *const c_char) {
     WARNINGS.fetch_add(1, Ordering::Relaxed);
+    if msg.is_null() {
+        return;
+    }
+    // SAFETY: MuJoCo passes a NUL-terminated string that lives for the call.
+    let bytes = unsafe { CStr::from_ptr(msg) }.to_bytes();
     if let Ok(mut last) = LAST_WARNING.lock() {
-        *last = message(msg);
+        let n = bytes.len().min(last.0.len());
+        last.0[..n].copy_from_slice(&bytes[..n]);
+        last.1 = n;
     }
 }
 
@@ -61,8 +70,8 @@ pub fn warning_count() -> u64 {
     WARNINGS.load(Ordering::Relaxed)
 }
 
-/// The text of the most recent MuJoCo warning, if any.
+/// The text of the most recent MuJoCo warning (at most 256 bytes), if any.
 pub fn last_warning() -> Option<String> {
     let last = LAST_WARNING.lock().ok()?;
-    (!last.is_empty()).then(|| last.clone())
+    (last.1 > 0).then(|| String::from_utf8_lossy(&last.0[..last.1]).into_owned())
 }
