@@ -18,7 +18,7 @@
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::obs::{self, CRITIC_DIM, OBS_DIM, SCAN_DIM};
+use super::obs;
 use super::scene::BodyClass;
 use super::state::{rotate_inv, rpy, wrap_angle, EnvState};
 use super::{EnvShared, Outcome};
@@ -320,11 +320,7 @@ impl LocoEnv {
     /// Height of the ground this env's physics sees.
     #[inline]
     pub fn ground(&self, sh: &EnvShared, x: f64, y: f64) -> f64 {
-        if self.on_plane {
-            0.0
-        } else {
-            sh.scene.ground(x, y)
-        }
+        ground_at(self.on_plane, &sh.scene, x, y)
     }
 
     /// Whether this env runs on a plane in place of its Flat tiles (scene doc).
@@ -336,7 +332,7 @@ impl LocoEnv {
     fn derive_state(&mut self, sh: &EnvShared) {
         let scene = &sh.scene;
         let on_plane = self.on_plane;
-        let ground = |x: f64, y: f64| if on_plane { 0.0 } else { scene.ground(x, y) };
+        let ground = |x: f64, y: f64| ground_at(on_plane, scene, x, y);
         let g1 = &scene.g1;
         let d = &self.data;
         let s = &mut self.state;
@@ -463,99 +459,29 @@ impl LocoEnv {
         self.level = next_level(self.level, up, down, map.num_levels(), &mut self.rng);
     }
 
-    /// Observations of the current state (step 10).
+    /// Observations of the current state (step 10), written by [`obs::write`].
     fn write_obs(&mut self, sh: &EnvShared, obs: &mut [f32], critic: &mut [f32], scan: &mut [f32]) {
-        let s = &self.state;
-        let oc = &sh.cfg.observation;
-        let sc = &oc.scales;
-        let phase = {
-            let t = self.step_in_episode as f64 * s.dt;
-            2.0 * std::f64::consts::PI * (t / oc.gait_period_s).fract()
+        let (on_plane, scene) = (self.on_plane, &sh.scene);
+        let ctx = obs::ObsContext {
+            state: &self.state,
+            cfg: &sh.cfg.observation,
+            time: self.step_in_episode as f64 * self.state.dt,
+            robot_weight: scene.robot_weight,
+            bucket: scene.buckets[self.bucket],
+            latency: self.latency,
+            ground: &|x, y| ground_at(on_plane, scene, x, y),
         };
-        // noise-free state into the critic's first OBS_DIM entries
-        let clip = oc.clip;
-        let put = |buf: &mut [f32], i: usize, v: f64| buf[i] = v.clamp(-clip, clip) as f32;
-        for a in 0..3 {
-            put(
-                critic,
-                obs::ANG_VEL.start + a,
-                s.base_ang_vel[a] * sc.ang_vel,
-            );
-            put(critic, obs::GRAVITY.start + a, s.gravity[a]);
-            put(
-                critic,
-                obs::COMMAND.start + a,
-                s.command[a] * sc.commands[a],
-            );
-        }
-        for j in 0..NUM_JOINTS {
-            put(
-                critic,
-                obs::DOF_POS.start + j,
-                (s.q[j] - s.default_q[j]) * sc.dof_pos,
-            );
-            put(critic, obs::DOF_VEL.start + j, s.qd[j] * sc.dof_vel);
-            put(critic, obs::LAST_ACTION.start + j, s.action[j]);
-        }
-        put(critic, obs::PHASE.start, phase.sin());
-        put(critic, obs::PHASE.start + 1, phase.cos());
-        // privileged block
-        let p = OBS_DIM;
-        for a in 0..3 {
-            put(critic, p + a, s.base_lin_vel[a] * sc.lin_vel);
-        }
-        put(critic, p + 3, s.base_height);
-        for k in 0..2 {
-            for a in 0..3 {
-                put(
-                    critic,
-                    p + 4 + 3 * k + a,
-                    s.feet_force[k][a] / sh.scene.robot_weight,
-                );
-            }
-        }
-        let b = sh.scene.buckets[self.bucket];
-        put(critic, p + 10, b.friction);
-        put(critic, p + 11, b.added_mass);
-        put(critic, p + 12, b.motor_strength);
-        put(critic, p + 13, self.latency as f64);
-        debug_assert_eq!(p + 14, CRITIC_DIM);
+        obs::write(&ctx, &mut self.rng, obs, critic, scan);
+    }
+}
 
-        // actor = critic's state + noise
-        obs.copy_from_slice(&critic[..OBS_DIM]);
-        if oc.add_noise {
-            let (n, lvl) = (&oc.noise, oc.noise_level);
-            let mut add = |r: std::ops::Range<usize>, width: f64| {
-                for i in r {
-                    let e = self.rng.random_range(-1.0..=1.0) * width * lvl;
-                    obs[i] = (obs[i] as f64 + e).clamp(-clip, clip) as f32;
-                }
-            };
-            add(obs::ANG_VEL, n.ang_vel * sc.ang_vel);
-            add(obs::GRAVITY, n.gravity);
-            add(obs::DOF_POS, n.dof_pos * sc.dof_pos);
-            add(obs::DOF_VEL, n.dof_vel * sc.dof_vel);
-        }
-
-        // scandots
-        let (sy, cy) = s.yaw.sin_cos();
-        let noise = if oc.add_noise {
-            oc.noise.scan * oc.noise_level
-        } else {
-            0.0
-        };
-        for k in 0..SCAN_DIM {
-            let (px, py) = obs::scan_point(k);
-            let x = s.base_pos[0] + cy * px - sy * py;
-            let y = s.base_pos[1] + sy * px + cy * py;
-            let rel = (self.ground(sh, x, y) - s.base_pos[2]).clamp(-oc.scan_clip, oc.scan_clip);
-            let e = if noise > 0.0 {
-                self.rng.random_range(-noise..=noise)
-            } else {
-                0.0
-            };
-            scan[k] = ((rel + e) * sc.scan) as f32;
-        }
+/// The ground an env's physics sees: its plane, or the scene's terrain.
+#[inline]
+fn ground_at(on_plane: bool, scene: &super::Scene, x: f64, y: f64) -> f64 {
+    if on_plane {
+        0.0
+    } else {
+        scene.ground(x, y)
     }
 }
 

@@ -21,6 +21,11 @@
 //! Scandots ([`SCAN_DIM`] = 17 x 11): terrain height minus pelvis height (m) at
 //! `x` in -0.6..=1.0 and `y` in -0.5..=0.5, 0.1 m apart, in the yaw-aligned pelvis
 //! frame; index = `ix * 11 + iy` (x-major, x from back to front, y from right to left).
+use rand::Rng;
+
+use super::scene::BucketParams;
+use super::state::EnvState;
+use crate::config::ObservationConfig;
 use crate::robot::NUM_JOINTS;
 
 pub const ANG_VEL: std::ops::Range<usize> = 0..3;
@@ -56,3 +61,107 @@ pub fn scan_point(k: usize) -> (f64, f64) {
 
 const _: () = assert!(OBS_DIM == 98, "the paper's state is 98 floats");
 const _: () = assert!(SCAN_DIM == 187, "the paper's scandots are 187 floats");
+
+/// What [`write`] reads for one env.
+pub struct ObsContext<'a> {
+    pub state: &'a EnvState,
+    pub cfg: &'a ObservationConfig,
+    /// Time since the episode started (s), for the gait phase.
+    pub time: f64,
+    /// Robot weight (N) that normalizes the feet forces.
+    pub robot_weight: f64,
+    pub bucket: BucketParams,
+    pub latency: usize,
+    /// Ground height at a world point, as this env's physics sees it.
+    pub ground: &'a dyn Fn(f64, f64) -> f64,
+}
+
+/// Write one env's actor observation (`OBS_DIM`, with noise), critic observation
+/// (`CRITIC_DIM`, noise-free state + privileged block) and scandots (`SCAN_DIM`), in
+/// the layout of this module's doc. Every value is clipped; nothing allocates.
+pub fn write(
+    ctx: &ObsContext<'_>,
+    rng: &mut impl Rng,
+    obs: &mut [f32],
+    critic: &mut [f32],
+    scan: &mut [f32],
+) {
+    let (s, oc) = (ctx.state, ctx.cfg);
+    let sc = &oc.scales;
+    let clip = oc.clip;
+    let put = |buf: &mut [f32], i: usize, v: f64| buf[i] = v.clamp(-clip, clip) as f32;
+    // the noise-free state, into the critic's first OBS_DIM entries
+    for a in 0..3 {
+        put(critic, ANG_VEL.start + a, s.base_ang_vel[a] * sc.ang_vel);
+        put(critic, GRAVITY.start + a, s.gravity[a]);
+        put(critic, COMMAND.start + a, s.command[a] * sc.commands[a]);
+    }
+    for j in 0..NUM_JOINTS {
+        put(
+            critic,
+            DOF_POS.start + j,
+            (s.q[j] - s.default_q[j]) * sc.dof_pos,
+        );
+        put(critic, DOF_VEL.start + j, s.qd[j] * sc.dof_vel);
+        put(critic, LAST_ACTION.start + j, s.action[j]);
+    }
+    let phase = 2.0 * std::f64::consts::PI * (ctx.time / oc.gait_period_s).fract();
+    put(critic, PHASE.start, phase.sin());
+    put(critic, PHASE.start + 1, phase.cos());
+    // the privileged block
+    let p = OBS_DIM;
+    for a in 0..3 {
+        put(critic, p + a, s.base_lin_vel[a] * sc.lin_vel);
+    }
+    put(critic, p + 3, s.base_height);
+    for k in 0..2 {
+        for a in 0..3 {
+            put(
+                critic,
+                p + 4 + 3 * k + a,
+                s.feet_force[k][a] / ctx.robot_weight,
+            );
+        }
+    }
+    put(critic, p + 10, ctx.bucket.friction);
+    put(critic, p + 11, ctx.bucket.added_mass);
+    put(critic, p + 12, ctx.bucket.motor_strength);
+    put(critic, p + 13, ctx.latency as f64);
+    debug_assert_eq!(p + 14, CRITIC_DIM);
+
+    // the actor: the critic's state plus noise
+    obs.copy_from_slice(&critic[..OBS_DIM]);
+    if oc.add_noise {
+        let (n, lvl) = (&oc.noise, oc.noise_level);
+        let mut add = |r: std::ops::Range<usize>, width: f64| {
+            for i in r {
+                let e = rng.random_range(-1.0..=1.0) * width * lvl;
+                obs[i] = (obs[i] as f64 + e).clamp(-clip, clip) as f32;
+            }
+        };
+        add(ANG_VEL, n.ang_vel * sc.ang_vel);
+        add(GRAVITY, n.gravity);
+        add(DOF_POS, n.dof_pos * sc.dof_pos);
+        add(DOF_VEL, n.dof_vel * sc.dof_vel);
+    }
+
+    // scandots in the yaw-aligned frame
+    let (sy, cy) = s.yaw.sin_cos();
+    let noise = if oc.add_noise {
+        oc.noise.scan * oc.noise_level
+    } else {
+        0.0
+    };
+    for (k, out) in scan.iter_mut().enumerate().take(SCAN_DIM) {
+        let (px, py) = scan_point(k);
+        let x = s.base_pos[0] + cy * px - sy * py;
+        let y = s.base_pos[1] + sy * px + cy * py;
+        let rel = ((ctx.ground)(x, y) - s.base_pos[2]).clamp(-oc.scan_clip, oc.scan_clip);
+        let e = if noise > 0.0 {
+            rng.random_range(-noise..=noise)
+        } else {
+            0.0
+        };
+        *out = ((rel + e) * sc.scan) as f32;
+    }
+}
