@@ -7,10 +7,12 @@
 //! * [`terrain`] procedural heightfields: terrain kinds, curriculum map, lanes, PNGs
 //! * [`env`] the locomotion env and the batched `VecEnv`
 //! * [`config`] serde structs of the YAML experiment files
+//! * [`run`] run directories (config.yaml, metrics.csv, log.txt) and progress bars
 //! * [`bench`] the `dreampolicy bench ...` measurements
 pub mod bench;
 pub mod config;
 pub mod env;
 pub mod robot;
+pub mod run;
 pub mod sim;
 pub mod terrain;

@@ -48,3 +48,67 @@ fn missing_robot_description_says_to_run_setup() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("run scripts/setup.sh"), "{err}");
 }
+
+#[test]
+fn rollout_writes_a_run_directory_whose_config_loads_back() {
+    let dir = std::env::temp_dir().join(format!("dreampolicy-rollout-{}", std::process::id()));
+    let out = bin()
+        .args([
+            "rollout",
+            "--config",
+            concat!(env!("CARGO_MANIFEST_DIR"), "/configs/terrain_small.yaml"),
+            "--set",
+            "env.n_envs=4",
+            "--set",
+            "env.episode_length_s=0.5",
+            "--steps",
+            "60",
+            "--policy",
+            "zero",
+            "--quiet",
+            "--json",
+            "--out",
+        ])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["steps"], 60);
+    assert_eq!(v["n_envs"], 4);
+    assert_eq!(v["blowups"], 0);
+    assert_eq!(v["warnings"], 0);
+    // 0.5 s episodes: 25 steps each, so every env finished at least two
+    assert!(v["episodes"].as_u64().unwrap() >= 8, "{v}");
+    let csv = std::fs::read_to_string(dir.join("metrics.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(
+        lines[0],
+        "step,reward_per_step,episodes,falls,blowups,mean_level"
+    );
+    assert_eq!(lines.len(), 1 + 2, "rows at steps 50 and 60");
+    // the resolved config is complete and loads back as it was run
+    let back = dreampolicy::config::load(&dir.join("config.yaml"), &[]).unwrap();
+    assert_eq!(back.env.n_envs, 4);
+    assert_eq!(back.env.episode_length_s, 0.5);
+    assert!(std::fs::read_to_string(dir.join("log.txt"))
+        .unwrap()
+        .contains("rollout Zero 60 steps"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn rollout_reports_a_bad_config_in_one_line() {
+    let out = bin()
+        .args(["rollout", "--config", "/no/such.yaml"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains("cannot read config /no/such.yaml"), "{err}");
+}

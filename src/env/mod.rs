@@ -4,6 +4,7 @@
 pub mod locomotion;
 pub mod obs;
 pub mod rewards;
+pub mod rollout;
 pub mod scene;
 pub mod state;
 mod vec_env;

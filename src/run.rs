@@ -1,0 +1,149 @@
+//! Run directories and progress: what every long job writes and shows.
+//!
+//! A run directory holds `config.yaml` (the resolved config), `metrics.csv` (one
+//! row per logging step, header first) and `log.txt`. Progress is an `indicatif`
+//! bar with rate and ETA on a terminal; with `--quiet` or when stderr is not a
+//! terminal it falls back to plain log lines.
+use std::fs::{File, OpenOptions};
+use std::io::{BufWriter, IsTerminal, Write};
+use std::path::{Path, PathBuf};
+
+use indicatif::{ProgressBar, ProgressStyle};
+use serde::Serialize;
+
+/// Errors around a run directory.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("cannot write the resolved config: {0}")]
+    Yaml(#[from] serde_yaml::Error),
+    #[error("metrics.csv: row has {got} values for {expected} columns")]
+    Columns { expected: usize, got: usize },
+}
+
+fn io(path: &Path) -> impl FnOnce(std::io::Error) -> RunError + '_ {
+    move |source| RunError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// An open run directory.
+pub struct RunDir {
+    path: PathBuf,
+    metrics: BufWriter<File>,
+    columns: Vec<String>,
+    log: BufWriter<File>,
+}
+
+impl RunDir {
+    /// Create `path` (and parents), write `config.yaml` from `config`, and start
+    /// `metrics.csv` with `columns`. An existing `metrics.csv` is replaced.
+    pub fn create(
+        path: &Path,
+        config: &impl Serialize,
+        columns: &[&str],
+    ) -> Result<RunDir, RunError> {
+        std::fs::create_dir_all(path).map_err(io(path))?;
+        let cfg_path = path.join("config.yaml");
+        let tmp = path.join(".config.yaml.tmp");
+        std::fs::write(&tmp, serde_yaml::to_string(config)?).map_err(io(&tmp))?;
+        std::fs::rename(&tmp, &cfg_path).map_err(io(&cfg_path))?;
+        let mpath = path.join("metrics.csv");
+        let mut metrics = BufWriter::new(File::create(&mpath).map_err(io(&mpath))?);
+        writeln!(metrics, "{}", columns.join(",")).map_err(io(&mpath))?;
+        let lpath = path.join("log.txt");
+        let log = OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&lpath)
+            .map_err(io(&lpath))?;
+        Ok(RunDir {
+            path: path.to_path_buf(),
+            metrics,
+            columns: columns.iter().map(|c| c.to_string()).collect(),
+            log: BufWriter::new(log),
+        })
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Append one metrics row (same order as the columns) and flush it.
+    pub fn metrics_row(&mut self, values: &[f64]) -> Result<(), RunError> {
+        if values.len() != self.columns.len() {
+            return Err(RunError::Columns {
+                expected: self.columns.len(),
+                got: values.len(),
+            });
+        }
+        let row: Vec<String> = values.iter().map(|v| format!("{v}")).collect();
+        let mpath = self.path.join("metrics.csv");
+        writeln!(self.metrics, "{}", row.join(",")).map_err(io(&mpath))?;
+        self.metrics.flush().map_err(io(&mpath))
+    }
+
+    /// Append a line to `log.txt`.
+    pub fn log(&mut self, line: &str) -> Result<(), RunError> {
+        let lpath = self.path.join("log.txt");
+        writeln!(self.log, "{line}").map_err(io(&lpath))?;
+        self.log.flush().map_err(io(&lpath))
+    }
+}
+
+/// A progress bar, or plain lines every `every` steps when quiet or not a terminal.
+pub struct Progress {
+    bar: Option<ProgressBar>,
+    total: u64,
+    every: u64,
+    label: String,
+}
+
+impl Progress {
+    pub fn new(label: &str, total: u64, quiet: bool) -> Progress {
+        let bar = (!quiet && std::io::stderr().is_terminal()).then(|| {
+            let bar = ProgressBar::new(total);
+            bar.set_style(
+                ProgressStyle::with_template(
+                    "{msg} [{bar:30}] {pos}/{len} {per_sec} ETA {eta} {prefix}",
+                )
+                .unwrap_or_else(|_| ProgressStyle::default_bar())
+                .progress_chars("=> "),
+            );
+            bar.set_message(label.to_string());
+            bar
+        });
+        Progress {
+            bar,
+            total,
+            every: (total / 10).max(1),
+            label: label.to_string(),
+        }
+    }
+
+    /// Advance to `pos`; `status` is shown beside the bar or on the plain line.
+    pub fn set(&self, pos: u64, status: &str) {
+        match &self.bar {
+            Some(bar) => {
+                bar.set_position(pos);
+                bar.set_prefix(status.to_string());
+            }
+            None if pos.is_multiple_of(self.every) || pos == self.total => {
+                eprintln!("{} {pos}/{} {status}", self.label, self.total)
+            }
+            None => {}
+        }
+    }
+
+    pub fn finish(&self) {
+        if let Some(bar) = &self.bar {
+            bar.finish();
+        }
+    }
+}
