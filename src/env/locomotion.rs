@@ -124,6 +124,16 @@ impl LocoEnv {
         self.level
     }
 
+    /// Domain-randomization bucket (index into `Scene::buckets`).
+    pub fn bucket(&self) -> usize {
+        self.bucket
+    }
+
+    /// Action latency of the current episode (control steps).
+    pub fn latency(&self) -> usize {
+        self.latency
+    }
+
     /// Per-term reward sums of the last finished episode (order of `RewardSet::names`).
     pub fn last_episode_sums(&self) -> &[f64] {
         &self.last_sums
