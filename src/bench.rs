@@ -102,7 +102,7 @@ pub fn env(
     let mut c2 = cfg.clone();
     c2.threads = 2;
     let mut v1 = VecEnv::new(&c1)?;
-    let mut v2 = VecEnv::with_scene(&c2, crate::env::Scene::build(&c2)?)?;
+    let mut v2 = VecEnv::new(&c2)?;
     let n = v1.n_envs();
     let zeros = vec![0.0f32; n * robot::NUM_JOINTS];
     let dec = cfg.sim.decimation;

@@ -1,13 +1,13 @@
 //! Domain randomization and commands do what the config says.
-use dreampolicy::config::{self, ExperimentConfig};
+use dreampolicy::config::ExperimentConfig;
 use dreampolicy::env::obs::OBS_DIM;
 use dreampolicy::env::{Scene, VecEnv};
 use dreampolicy::robot::NUM_JOINTS;
 
+mod common;
+
 fn cfg(sets: &[&str]) -> ExperimentConfig {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/flat_small.yaml");
-    let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
-    config::load(&path, &sets).unwrap()
+    common::load_config("flat_small.yaml", sets)
 }
 
 #[test]

@@ -5,10 +5,10 @@ use dreampolicy::env::obs::{self, CRITIC_DIM, OBS_DIM, SCAN_DIM};
 use dreampolicy::env::VecEnv;
 use dreampolicy::robot::NUM_JOINTS;
 
+mod common;
+
 fn cfg(sets: &[&str]) -> ExperimentConfig {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/flat_small.yaml");
-    let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
-    config::load(&path, &sets).unwrap()
+    common::load_config("flat_small.yaml", sets)
 }
 
 #[test]

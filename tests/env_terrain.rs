@@ -5,14 +5,16 @@ use dreampolicy::env::obs::{self, SCAN_DIM};
 use dreampolicy::env::VecEnv;
 use dreampolicy::robot::NUM_JOINTS;
 
+mod common;
+
+/// terrain_small.yaml without randomization or noise, plus `sets`.
 fn cfg(sets: &[&str]) -> ExperimentConfig {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/terrain_small.yaml");
     let mut all = vec![
-        "env.domain_rand.enabled=false".to_string(),
-        "env.observation.add_noise=false".to_string(),
+        "env.domain_rand.enabled=false",
+        "env.observation.add_noise=false",
     ];
-    all.extend(sets.iter().map(|s| s.to_string()));
-    config::load(&path, &all).unwrap()
+    all.extend_from_slice(sets);
+    common::load_config("terrain_small.yaml", &all)
 }
 
 #[test]

@@ -244,28 +244,24 @@ fn bucket_models(
 /// so that robot geoms collide with the ground only.
 fn configure_collisions(model: &mut Model, g1: &G1, self_collisions: bool) {
     let bodies = model.geom_bodyid().to_vec();
-    let contype = model.geom_contype().to_vec();
-    let raw = model.raw_mut();
+    // world geoms and visual-only geoms (contype = conaffinity = 0) stay as they are
+    let robot: Vec<bool> = bodies
+        .iter()
+        .zip(model.geom_contype().iter().zip(model.geom_conaffinity()))
+        .map(|(&b, (&ct, &ca))| b != 0 && (ct != 0 || ca != 0))
+        .collect();
     for (g, &b) in bodies.iter().enumerate() {
-        if b == 0 || contype[g] == 0 && raw_conaffinity(raw, g) == 0 {
-            continue; // world geoms and visual-only geoms
+        if robot[g] && !g1.feet.contains(&(b as usize)) {
+            model.geom_condim_mut()[g] = 1;
         }
-        let foot = g1.feet.contains(&(b as usize));
-        // SAFETY: g < ngeom; the arrays have ngeom entries.
-        unsafe {
-            if !foot {
-                *raw.geom_condim.add(g) = 1;
-            }
-            if !self_collisions {
-                *raw.geom_contype.add(g) = 0;
+    }
+    if !self_collisions {
+        for (g, ct) in model.geom_contype_mut().iter_mut().enumerate() {
+            if robot[g] {
+                *ct = 0;
             }
         }
     }
-}
-
-fn raw_conaffinity(raw: &mujoco_sys::mjModel, g: usize) -> i32 {
-    // SAFETY: g < ngeom.
-    unsafe { *raw.geom_conaffinity.add(g) }
 }
 
 fn classify_bodies(model: &Model, g1: &G1, fatal: &[String]) -> Result<Vec<BodyClass>, EnvError> {

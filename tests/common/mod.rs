@@ -29,3 +29,12 @@ impl Drop for Scratch {
         let _ = std::fs::remove_dir_all(&self.0);
     }
 }
+
+/// Load `configs/<name>` of this checkout with `--set` overrides.
+pub fn load_config(name: &str, sets: &[&str]) -> dreampolicy::config::ExperimentConfig {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("configs")
+        .join(name);
+    let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+    dreampolicy::config::load(&path, &sets).unwrap()
+}
