@@ -1,11 +1,12 @@
 //! Finds a MuJoCo build, runs bindgen over its headers and links it.
 //!
-//! * default: Debian 12's `libmujoco-dev` (MuJoCo 2.2.2): headers in
-//!   `/usr/include/mujoco`, library in the multiarch lib dir.
 //! * `MUJOCO_DIR=<dir>`: `<dir>/include/mujoco/mujoco.h` and
 //!   `<dir>/lib/libmujoco.so[.X.Y.Z]`. A library that only exists under its
 //!   versioned name (the PyPI wheel ships `libmujoco.so.3.3.7`) is linked with
-//!   a verbatim name.
+//!   a verbatim name. The workspace's `.cargo/config.toml` sets it to the
+//!   MuJoCo 3.3.7 that `scripts/setup.sh` unpacks: that is the default build.
+//! * `MUJOCO_DIR=system` (or unset): Debian 12's `libmujoco-dev` (MuJoCo 2.2.2):
+//!   headers in `/usr/include/mujoco`, library in the multiarch lib dir.
 //!
 //! Emits `cfg(mujoco_v3)` for 3.x headers and, through `links = "mujoco"`,
 //! `DEP_MUJOCO_LIB_DIR` / `DEP_MUJOCO_VERSION` for dependents' build scripts
@@ -17,7 +18,7 @@ fn main() {
     println!("cargo:rerun-if-changed=build.rs");
     println!("cargo:rustc-check-cfg=cfg(mujoco_v3)");
 
-    let (include_dir, lib_dir) = match std::env::var_os("MUJOCO_DIR") {
+    let (include_dir, lib_dir) = match std::env::var_os("MUJOCO_DIR").filter(|d| d != "system") {
         Some(dir) => {
             let dir = PathBuf::from(dir);
             (dir.join("include"), dir.join("lib"))
@@ -35,7 +36,8 @@ fn main() {
     let header = include_dir.join("mujoco").join("mujoco.h");
     if !header.exists() {
         panic!(
-            "{} not found: install libmujoco-dev or point MUJOCO_DIR at a MuJoCo build",
+            "{} not found: run scripts/setup.sh (it unpacks MuJoCo 3.3.7 into third_party/), \
+             set MUJOCO_DIR=system for Debian's libmujoco-dev, or point MUJOCO_DIR at a MuJoCo build",
             header.display()
         );
     }
