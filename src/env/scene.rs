@@ -185,7 +185,7 @@ pub fn scene_xml(cfg: &EnvConfig, terrain: Option<&TerrainMap>) -> String {
     format!(
         r#"<mujoco model="g1_dreampolicy">
   <include file="g1_actuators.xml"/>
-  <option timestep="{dt}" integrator="{integrator}"/>
+  <option timestep="{dt}" integrator="{integrator}" iterations="{iterations}" ls_iterations="{ls_iterations}"/>
   <size nconmax="{nconmax}" njmax="{njmax}"/>
   {asset}
   <worldbody>
@@ -195,6 +195,8 @@ pub fn scene_xml(cfg: &EnvConfig, terrain: Option<&TerrainMap>) -> String {
 "#,
         dt = cfg.sim.timestep,
         integrator = cfg.sim.integrator.mjcf(),
+        iterations = cfg.sim.iterations,
+        ls_iterations = cfg.sim.ls_iterations,
         nconmax = cfg.sim.nconmax,
         njmax = cfg.sim.njmax,
     )
@@ -213,7 +215,7 @@ fn compile(cfg: &EnvConfig, terrain: Option<&TerrainMap>) -> Result<(Model, G1),
         let hid = model.geom_dataid()[geom] as usize;
         model.set_hfield_data(hid, &map.hfield_data())?;
     }
-    configure_collisions(&mut model, &g1, cfg.sim.self_collisions);
+    configure_collisions(&mut model, &g1, &cfg.sim);
     Ok((model, g1))
 }
 
@@ -241,8 +243,11 @@ fn bucket_models(
 
 /// Robot geoms: only the feet keep condim 3 (others frictionless, condim 1, as in
 /// mjlab's G1 setup), and without self-collisions the robot's contype is cleared
-/// so that robot geoms collide with the ground only.
-fn configure_collisions(model: &mut Model, g1: &G1, self_collisions: bool) {
+/// so that robot geoms collide with the ground only. `feet_only` also clears the
+/// conaffinity of every non-foot robot geom: they touch nothing (Playground's
+/// G1 training scene).
+fn configure_collisions(model: &mut Model, g1: &G1, sim: &crate::config::SimConfig) {
+    let self_collisions = sim.self_collisions;
     let bodies = model.geom_bodyid().to_vec();
     // world geoms and visual-only geoms (contype = conaffinity = 0) stay as they are
     let robot: Vec<bool> = bodies
@@ -259,6 +264,14 @@ fn configure_collisions(model: &mut Model, g1: &G1, self_collisions: bool) {
         for (g, ct) in model.geom_contype_mut().iter_mut().enumerate() {
             if robot[g] {
                 *ct = 0;
+            }
+        }
+    }
+    if sim.collision == crate::config::CollisionMode::FeetOnly {
+        for (g, &b) in bodies.iter().enumerate() {
+            if robot[g] && !g1.feet.contains(&(b as usize)) {
+                model.geom_contype_mut()[g] = 0;
+                model.geom_conaffinity_mut()[g] = 0;
             }
         }
     }

@@ -436,6 +436,11 @@ impl Model {
         // SAFETY: ngeom ints, exclusive through &mut self.
         unsafe { slice_mut(self.raw_mut().geom_condim, ng) }
     }
+    pub fn geom_conaffinity_mut(&mut self) -> &mut [i32] {
+        let ng = self.ngeom();
+        // SAFETY: ngeom ints, exclusive through &mut self.
+        unsafe { slice_mut(self.raw_mut().geom_conaffinity, ng) }
+    }
     pub fn geom_conaffinity(&self) -> &[i32] {
         // SAFETY: ngeom ints.
         unsafe { slice(self.raw().geom_conaffinity, self.ngeom()) }

@@ -8,6 +8,12 @@ use serde::{Deserialize, Serialize};
 
 use crate::terrain::TerrainConfig;
 
+mod rl;
+pub use rl::{
+    Activation, EvalConfig, HistoryConfig, HistoryKind, LrSchedule, PolicyConfig, PpoConfig,
+    ScanEncoderConfig, TrainConfig,
+};
+
 /// Everything that can go wrong reading a config.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
@@ -25,11 +31,44 @@ pub enum ConfigError {
     Invalid(String),
 }
 
-/// A whole experiment file. Later stages (PPO, world model, ...) add sections.
+/// A whole experiment file. Sections other than `env` have defaults (the paper's).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ExperimentConfig {
+    /// What the trainer steps: the G1 locomotion env (default) or the cart-pole.
+    #[serde(default)]
+    pub task: TaskKind,
     pub env: EnvConfig,
+    #[serde(default)]
+    pub policy: PolicyConfig,
+    #[serde(default)]
+    pub ppo: PpoConfig,
+    #[serde(default)]
+    pub train: TrainConfig,
+    #[serde(default)]
+    pub eval: EvalConfig,
+}
+
+/// The environment a config trains on.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TaskKind {
+    /// The G1 on a plane or a terrain map (`env` configures it).
+    #[default]
+    G1,
+    /// MuJoCo cart-pole balancing (`env.n_envs`, `env.seed` only): tests PPO.
+    Cartpole,
+}
+
+impl ExperimentConfig {
+    /// Validate every section.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        self.env.validate()?;
+        self.policy.validate()?;
+        self.ppo.validate()?;
+        self.train.validate()?;
+        self.eval.validate()
+    }
 }
 
 /// The locomotion environment and its batch.
@@ -56,6 +95,7 @@ pub struct EnvConfig {
     pub observation: ObservationConfig,
     #[serde(default)]
     pub commands: CommandConfig,
+    #[serde(default)]
     pub rewards: RewardConfig,
     #[serde(default)]
     pub termination: TerminationConfig,
@@ -92,6 +132,22 @@ pub struct SimConfig {
     pub nconmax: usize,
     /// Constraint rows (`<size njmax>`); 2.2.2 allocates njmax^2 doubles per env.
     pub njmax: usize,
+    /// Which robot geoms touch the ground: `full` (every collision geom) or
+    /// `feet_only` (Playground's training scene; falls are then detected from
+    /// height and tilt only).
+    pub collision: CollisionMode,
+    /// Solver iterations (`<option iterations>`; MuJoCo's default 100).
+    pub iterations: usize,
+    /// Line-search iterations (`<option ls_iterations>`; MuJoCo's default 50).
+    pub ls_iterations: usize,
+}
+
+/// Robot-ground collision set of the scene.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CollisionMode {
+    Full,
+    FeetOnly,
 }
 
 /// MuJoCo's integrators, by their MJCF names.
@@ -126,6 +182,9 @@ impl Default for SimConfig {
             integrator: Integrator::Implicit,
             nconmax: 300,
             njmax: 1200,
+            collision: CollisionMode::Full,
+            iterations: 100,
+            ls_iterations: 50,
         }
     }
 }
@@ -280,7 +339,7 @@ impl Default for CommandConfig {
 
 /// Reward terms by name with their weights, and the parameters they share.
 /// Every term's value is multiplied by `weight * dt` (legged_gym / mjlab).
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RewardConfig {
     /// `name: weight`; an unknown name is a load error that lists the valid ones.
@@ -309,6 +368,12 @@ pub struct RewardParams {
     pub foot_clearance_target: f64,
     /// Terrain level from which `feet_edge` applies (the paper's "level > 3").
     pub feet_edge_min_level: usize,
+    /// Fraction of the gait period a leg is in stance (`gait_contact`).
+    pub gait_stance_ratio: f64,
+    /// Swing-foot height above the ground that `feet_swing_height` aims for (m).
+    pub swing_height_target: f64,
+    /// Width of the `upright` kernel.
+    pub upright_sigma: f64,
 }
 
 impl Default for RewardParams {
@@ -321,6 +386,9 @@ impl Default for RewardParams {
             feet_distance_target: 0.22,
             foot_clearance_target: 0.08,
             feet_edge_min_level: 3,
+            gait_stance_ratio: 0.55,
+            swing_height_target: 0.08,
+            upright_sigma: 0.2,
         }
     }
 }
@@ -457,7 +525,7 @@ pub fn from_str(
         path: label.to_string(),
         message: e.to_string(),
     })?;
-    cfg.env.validate()?;
+    cfg.validate()?;
     Ok(cfg)
 }
 
@@ -513,6 +581,9 @@ impl EnvConfig {
         }
         if self.sim.timestep.is_nan() || self.sim.timestep <= 0.0 || self.sim.decimation == 0 {
             return bad("env.sim.timestep must be > 0 and env.sim.decimation >= 1".into());
+        }
+        if self.sim.iterations == 0 || self.sim.ls_iterations == 0 {
+            return bad("env.sim.iterations and env.sim.ls_iterations must be >= 1".into());
         }
         if self.sim.integrator == Integrator::Implicitfast
             && mujoco_sys::MUJOCO_VERSION_HEADER < 300
