@@ -122,6 +122,8 @@ pub const FOOT_SITES: [&str; 2] = ["left_foot", "right_foot"];
 pub const IMU_SITE: &str = "imu_in_pelvis";
 /// Indices (canonical order) of the hip roll and yaw joints (hip-position reward).
 pub const HIP_ROLL_YAW: [usize; 4] = [1, 2, 7, 8];
+/// Waist and arm joints (canonical indices).
+pub const UPPER_BODY: std::ops::Range<usize> = 12..NUM_JOINTS;
 /// Bodies whose positions the world-model tracking reward compares.
 pub const TRACKED_BODIES: [&str; 13] = [
     "pelvis",

@@ -139,6 +139,33 @@ impl LocoEnv {
         &self.last_sums
     }
 
+    /// RNG state and level (see `rl::task::EnvSnapshot`).
+    pub fn snapshot(&self) -> crate::rl::task::EnvSnapshot {
+        crate::rl::task::EnvSnapshot {
+            rng_seed: self.rng.get_seed(),
+            rng_stream: self.rng.get_stream(),
+            rng_word_pos: self.rng.get_word_pos(),
+            level: self.level,
+        }
+    }
+
+    /// Restore a snapshot's RNG and level.
+    pub fn restore(
+        &mut self,
+        sh: &EnvShared,
+        s: &crate::rl::task::EnvSnapshot,
+    ) -> Result<(), String> {
+        let levels = sh.scene.terrain.as_ref().map_or(1, |m| m.num_levels());
+        if s.level >= levels {
+            return Err(format!("level {} of a map with {levels} levels", s.level));
+        }
+        self.rng = ChaCha8Rng::from_seed(s.rng_seed);
+        self.rng.set_stream(s.rng_stream);
+        self.rng.set_word_pos(s.rng_word_pos);
+        self.level = s.level;
+        Ok(())
+    }
+
     /// Reset and write the first observations.
     pub fn reset_and_observe(
         &mut self,
@@ -202,6 +229,8 @@ impl LocoEnv {
         self.state.terrain_level = self.level;
         self.resample_command(sh);
         self.derive_state(sh);
+        self.state.feet_vel = [[0.0; 3]; 2];
+        self.state.gait_phase = 0.0;
         self.state.last_qd = self.state.qd;
         self.state.last_torque = self.state.torque;
     }
@@ -274,6 +303,8 @@ impl LocoEnv {
         self.state.last_qd = self.state.qd;
         self.state.last_torque = self.state.torque;
         self.derive_state(sh);
+        self.state.gait_phase =
+            (self.step_in_episode as f64 * sh.dt / sh.cfg.observation.gait_period_s).fract();
         self.steer_heading(sh);
 
         // terminations and truncations
@@ -365,7 +396,11 @@ impl LocoEnv {
         let xpos = d.xpos();
         let xmat = d.xmat();
         for f in 0..2 {
-            s.feet_pos[f] = xpos[g1.feet[f]];
+            let p = xpos[g1.feet[f]];
+            for a in 0..3 {
+                s.feet_vel[f][a] = (p[a] - s.feet_pos[f][a]) / s.dt;
+            }
+            s.feet_pos[f] = p;
             s.feet_rpy[f] = rpy(&xmat[g1.feet[f]]);
             s.feet_ground[f] = ground(s.feet_pos[f][0], s.feet_pos[f][1]);
             s.feet_on_edge[f] = !on_plane

@@ -8,7 +8,7 @@
 //! ambiguous, the doc line says how it is read.
 use super::state::{wrap_angle, EnvState};
 use crate::config::RewardParams;
-use crate::robot::HIP_ROLL_YAW;
+use crate::robot::{HIP_ROLL_YAW, UPPER_BODY};
 
 /// One reward term.
 pub struct Term {
@@ -56,6 +56,12 @@ terms! {
     termination: "1 on the step of a fall (not a time-out)";
     dof_pos_limits: "sum of how far q is outside 90% of the joint range";
     dof_vel: "sum(qd^2)";
+    action_rate_l2: "sum((a_t - a_t-1)^2) (legged_gym's action_rate)";
+    gait_contact: "number of feet whose contact matches the gait clock: stance while the leg's phase < gait_stance_ratio (left phase = clock, right = clock + 0.5; unitree_rl_gym's contact)";
+    feet_swing_height: "sum over swing feet of (z_foot - ground - swing_height_target)^2";
+    contact_no_vel: "sum over feet in contact of |v_foot|^2 (slipping)";
+    upper_pose: "sum((q - q_default)^2) over the waist and arm joints";
+    upright: "exp(-(g_x^2 + g_y^2) / upright_sigma): a bounded, positive orientation term (mjlab's upright)";
 }
 
 /// The term with this name.
@@ -262,6 +268,47 @@ fn dof_pos_limits(s: &EnvState, _: &RewardParams) -> f64 {
 
 fn dof_vel(s: &EnvState, _: &RewardParams) -> f64 {
     s.qd.iter().map(|v| sq(*v)).sum()
+}
+
+fn action_rate_l2(s: &EnvState, _: &RewardParams) -> f64 {
+    s.action
+        .iter()
+        .zip(&s.last_action)
+        .map(|(a, b)| sq(a - b))
+        .sum()
+}
+
+/// Whether leg `k` (0 left, 1 right) should be in stance at gait clock `phase`.
+pub fn leg_in_stance(phase: f64, k: usize, stance_ratio: f64) -> bool {
+    (phase + 0.5 * k as f64).fract() < stance_ratio
+}
+
+fn gait_contact(s: &EnvState, p: &RewardParams) -> f64 {
+    (0..2)
+        .filter(|&k| s.feet_contact[k] == leg_in_stance(s.gait_phase, k, p.gait_stance_ratio))
+        .count() as f64
+}
+
+fn feet_swing_height(s: &EnvState, p: &RewardParams) -> f64 {
+    (0..2)
+        .filter(|&k| !s.feet_contact[k])
+        .map(|k| sq(s.feet_pos[k][2] - s.feet_ground[k] - p.swing_height_target))
+        .sum()
+}
+
+fn contact_no_vel(s: &EnvState, _: &RewardParams) -> f64 {
+    (0..2)
+        .filter(|&k| s.feet_contact[k])
+        .map(|k| s.feet_vel[k].iter().map(|v| sq(*v)).sum::<f64>())
+        .sum()
+}
+
+fn upper_pose(s: &EnvState, _: &RewardParams) -> f64 {
+    UPPER_BODY.map(|i| sq(s.q[i] - s.default_q[i])).sum()
+}
+
+fn upright(s: &EnvState, p: &RewardParams) -> f64 {
+    (-(sq(s.gravity[0]) + sq(s.gravity[1])) / p.upright_sigma).exp()
 }
 
 /// The configured terms resolved to functions once, with per-term episode sums.

@@ -53,6 +53,11 @@ pub struct EnvState {
     /// Foot on a terrain edge.
     pub feet_on_edge: [bool; 2],
     pub knees_pos: [[f64; 3]; 2],
+    /// Feet linear velocity (world), from their positions one control step apart.
+    pub feet_vel: [[f64; 3]; 2],
+    /// Gait clock in [0, 1): time in the episode / gait period (the left leg's
+    /// phase; the right leg is half a period later).
+    pub gait_phase: f64,
     /// Non-foot robot bodies touching the ground with more than the collision force.
     pub collisions: u32,
     /// The episode ends by a fall this step (not a time-out).
