@@ -6,12 +6,14 @@
 //! * [`robot`] G1 facts: joint order, motors, body sets, scene files
 //! * [`terrain`] procedural heightfields: terrain kinds, curriculum map, lanes, PNGs
 //! * [`env`] the locomotion env and the batched `VecEnv`
+//! * [`rl`] PPO on libtorch: actor-critic, storage, normalizers, checkpoints, runner
 //! * [`config`] serde structs of the YAML experiment files
 //! * [`run`] run directories (config.yaml, metrics.csv, log.txt) and progress bars
 //! * [`bench`] the `dreampolicy bench ...` measurements
 pub mod bench;
 pub mod config;
 pub mod env;
+pub mod rl;
 pub mod robot;
 pub mod run;
 pub mod sim;

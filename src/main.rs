@@ -59,11 +59,49 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Train a policy.
+    Train {
+        #[command(subcommand)]
+        which: TrainCommand,
+    },
     /// Procedural terrains.
     Terrain {
         #[command(subcommand)]
         which: TerrainCommand,
     },
+}
+
+#[derive(Subcommand)]
+enum TrainCommand {
+    /// PPO specialist (the flat walker, a terrain specialist) on the G1 env.
+    Specialist(TrainArgs),
+}
+
+/// What every trainer takes.
+#[derive(clap::Args)]
+struct TrainArgs {
+    /// Experiment config (YAML).
+    #[arg(long, required_unless_present = "resume")]
+    config: Option<PathBuf>,
+    /// Override a config value, e.g. --set ppo.learning_rate=1e-4 (repeatable).
+    #[arg(long = "set")]
+    sets: Vec<String>,
+    /// Run directory (default runs/<config name>).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Continue the run in this directory from its latest checkpoint (its
+    /// config.yaml, plus any --set, e.g. a larger train.iterations).
+    #[arg(long)]
+    resume: Option<PathBuf>,
+    /// Overrides train.seed.
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Overrides env.threads and train.torch_threads.
+    #[arg(long)]
+    threads: Option<i64>,
+    /// Plain log lines instead of a progress bar.
+    #[arg(long)]
+    quiet: bool,
 }
 
 #[derive(Subcommand)]
@@ -209,6 +247,9 @@ fn run(cli: Cli) -> Result<()> {
             } => terrain_render(kind, then, level, map, config, sets, seed, out),
         },
         Command::Info { json } => info(json),
+        Command::Train { which } => match which {
+            TrainCommand::Specialist(args) => train_specialist(args),
+        },
         Command::Bench { which } => match which {
             BenchCommand::Sim {
                 json,
@@ -250,6 +291,48 @@ fn run(cli: Cli) -> Result<()> {
             }
         },
     }
+}
+
+fn train_specialist(args: TrainArgs) -> Result<()> {
+    use dreampolicy::rl::runner;
+    let mut sets = args.sets.clone();
+    if let Some(seed) = args.seed {
+        sets.push(format!("train.seed={seed}"));
+    }
+    if let Some(t) = args.threads {
+        sets.push(format!("env.threads={t}"));
+        sets.push(format!("train.torch_threads={t}"));
+    }
+    let (cfg, run_path) = match &args.resume {
+        Some(dir) => {
+            let cfg = config::load(&dir.join("config.yaml"), &sets)
+                .with_context(|| format!("resuming {}", dir.display()))?;
+            (cfg, dir.clone())
+        }
+        None => {
+            let path = args.config.as_ref().context("--config is required")?;
+            let cfg = config::load(path, &sets)?;
+            let stem = path
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "run".into());
+            let out = args
+                .out
+                .clone()
+                .unwrap_or_else(|| PathBuf::from("runs").join(stem));
+            if runner::latest_checkpoint(&out).exists() {
+                anyhow::bail!(
+                    "{} already holds a run: continue it with --resume {0}, or choose another --out",
+                    out.display()
+                );
+            }
+            (cfg, out)
+        }
+    };
+    let s = runner::train(&cfg, &run_path, args.resume.is_some(), args.quiet)
+        .with_context(|| format!("training in {}", run_path.display()))?;
+    println!("{}", serde_json::to_string(&s)?);
+    Ok(())
 }
 
 fn info(json: bool) -> Result<()> {

@@ -71,6 +71,36 @@ impl RunDir {
         })
     }
 
+    /// Reopen a run directory to resume it: `config.yaml` is rewritten from
+    /// `config`, and `metrics.csv` keeps its header and the rows whose first
+    /// column is at most `up_to` (rows written after the checkpoint being
+    /// resumed are dropped: the resumed run writes them again), then appends.
+    pub fn resume(
+        path: &Path,
+        config: &impl Serialize,
+        columns: &[&str],
+        up_to: f64,
+    ) -> Result<RunDir, RunError> {
+        let mpath = path.join("metrics.csv");
+        let old = std::fs::read_to_string(&mpath).unwrap_or_default();
+        let kept: Vec<&str> = old
+            .lines()
+            .skip(1)
+            .filter(|l| {
+                l.split(',')
+                    .next()
+                    .and_then(|v| v.parse::<f64>().ok())
+                    .is_some_and(|v| v <= up_to)
+            })
+            .collect();
+        let mut run = RunDir::create(path, config, columns)?;
+        for l in kept {
+            writeln!(run.metrics, "{l}").map_err(io(&mpath))?;
+        }
+        run.metrics.flush().map_err(io(&mpath))?;
+        Ok(run)
+    }
+
     pub fn path(&self) -> &Path {
         &self.path
     }

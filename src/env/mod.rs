@@ -1,6 +1,7 @@
 //! The G1 locomotion environment of the paper and its batched, multithreaded
 //! [`VecEnv`]: observations ([`obs`] holds the layout), commands, named reward
 //! terms ([`rewards`]), terminations, terrain curriculum, domain randomization.
+pub mod cartpole;
 pub mod locomotion;
 pub mod obs;
 pub mod rewards;

@@ -101,6 +101,38 @@ impl VecEnv {
         self.envs.get_mut(i).map(|e| e.data_mut())
     }
 
+    /// RNG state and curriculum level of every env (checkpoints).
+    pub fn snapshot(&self) -> Vec<crate::rl::task::EnvSnapshot> {
+        self.envs.iter().map(|e| e.snapshot()).collect()
+    }
+
+    /// Restore what [`VecEnv::snapshot`] took (then [`VecEnv::reset_all`]).
+    pub fn restore(&mut self, snaps: &[crate::rl::task::EnvSnapshot]) -> Result<(), String> {
+        if snaps.len() != self.envs.len() {
+            return Err(format!(
+                "snapshot of {} envs for a batch of {}",
+                snaps.len(),
+                self.envs.len()
+            ));
+        }
+        for (e, s) in self.envs.iter_mut().zip(snaps) {
+            e.restore(&self.shared, s)?;
+        }
+        Ok(())
+    }
+
+    /// Reset env `i` now (an evaluation that ends an episode itself) and write its
+    /// observation rows.
+    pub fn reset_env(&mut self, i: usize) {
+        let (o, c, s) = (OBS_DIM, CRITIC_DIM, SCAN_DIM);
+        self.envs[i].reset_and_observe(
+            &self.shared,
+            &mut self.obs[i * o..(i + 1) * o],
+            &mut self.critic[i * c..(i + 1) * c],
+            &mut self.scan[i * s..(i + 1) * s],
+        );
+    }
+
     /// Reset every env and write the first observations.
     pub fn reset_all(&mut self) {
         let sh = &self.shared;

@@ -1,0 +1,300 @@
+//! Serde structs of the training sections: the actor-critic (`policy`), PPO
+//! (`ppo`), the run (`train`) and lane evaluation (`eval`). Defaults are the
+//! paper's values (appendix, "Details of Specialized Policy Learning").
+use serde::{Deserialize, Serialize};
+
+use super::ConfigError;
+
+/// Actor-critic structure: `a_t = F(E_hist(o_hist), E_scan(scan), o_t)` where
+/// `o_t` (98 floats) holds proprioception, command and last action.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PolicyConfig {
+    /// Hidden sizes of the actor backbone F.
+    pub actor_hidden: Vec<i64>,
+    /// Hidden sizes of the critic.
+    pub critic_hidden: Vec<i64>,
+    pub activation: Activation,
+    /// Initial action standard deviation.
+    pub init_std: f64,
+    /// Lower bound of the action standard deviation.
+    pub min_std: f64,
+    pub history: HistoryConfig,
+    pub scan_encoder: ScanEncoderConfig,
+}
+
+impl Default for PolicyConfig {
+    fn default() -> Self {
+        PolicyConfig {
+            actor_hidden: vec![512, 256, 128],
+            critic_hidden: vec![512, 256, 128],
+            activation: Activation::Elu,
+            init_std: 1.0,
+            min_std: 0.2,
+            history: HistoryConfig::default(),
+            scan_encoder: ScanEncoderConfig::default(),
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Activation {
+    Elu,
+    Relu,
+    Tanh,
+}
+
+/// The history encoder `E_hist` over the last `length` actor states (before `o_t`).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct HistoryConfig {
+    pub kind: HistoryKind,
+    /// Number of past states (control steps) the encoder sees.
+    pub length: usize,
+    /// GRU hidden size (paper: 512, one layer).
+    pub gru_hidden: i64,
+    /// MLP encoder sizes; the last is the latent size.
+    pub mlp_dims: Vec<i64>,
+}
+
+impl Default for HistoryConfig {
+    fn default() -> Self {
+        HistoryConfig {
+            kind: HistoryKind::Gru,
+            length: 5,
+            gru_hidden: 512,
+            mlp_dims: vec![256, 64],
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum HistoryKind {
+    /// No history encoder.
+    None,
+    /// MLP over the stacked past states.
+    Mlp,
+    /// GRU over the past states, oldest first; its last hidden state is the latent.
+    Gru,
+}
+
+/// The scandot encoder `E_scan` (MLP over the 187 heights).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ScanEncoderConfig {
+    pub enabled: bool,
+    pub dims: Vec<i64>,
+}
+
+impl Default for ScanEncoderConfig {
+    fn default() -> Self {
+        ScanEncoderConfig {
+            enabled: true,
+            dims: vec![128, 64, 32],
+        }
+    }
+}
+
+/// PPO hyperparameters (paper table; rsl_rl's names).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PpoConfig {
+    pub clip_param: f64,
+    pub gamma: f64,
+    pub lam: f64,
+    pub entropy_coef: f64,
+    pub value_loss_coef: f64,
+    pub max_grad_norm: f64,
+    pub learning_rate: f64,
+    /// Environment steps per env per iteration.
+    pub num_steps: usize,
+    pub num_epochs: usize,
+    pub num_minibatches: usize,
+    /// Clip the value update around the rollout's values (rsl_rl's use_clipped_value_loss).
+    pub clip_value: bool,
+    pub normalize_advantage: bool,
+    /// `fixed` or `adaptive` (rsl_rl: lr / 1.5 when KL > 2 desired, x 1.5 when < desired / 2).
+    pub schedule: LrSchedule,
+    pub desired_kl: f64,
+    /// Normalize actor and critic inputs with running statistics.
+    pub normalize_obs: bool,
+}
+
+impl Default for PpoConfig {
+    fn default() -> Self {
+        PpoConfig {
+            clip_param: 0.2,
+            gamma: 0.99,
+            lam: 0.95,
+            entropy_coef: 0.01,
+            value_loss_coef: 1.0,
+            max_grad_norm: 1.0,
+            learning_rate: 2e-4,
+            num_steps: 24,
+            num_epochs: 5,
+            num_minibatches: 4,
+            clip_value: true,
+            normalize_advantage: true,
+            schedule: LrSchedule::Fixed,
+            desired_kl: 0.01,
+            normalize_obs: true,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LrSchedule {
+    Fixed,
+    Adaptive,
+}
+
+/// The training run.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrainConfig {
+    /// PPO iterations (each `num_steps` x `n_envs` env-steps).
+    pub iterations: usize,
+    /// Write a resume checkpoint every this many iterations (0 = only at the end).
+    pub save_interval: usize,
+    /// Keep a numbered copy of the checkpoint every this many iterations (0 = none).
+    pub keep_interval: usize,
+    /// Seed of the trainer (network init, action noise, minibatch order).
+    pub seed: u64,
+    /// libtorch intra-op threads.
+    pub torch_threads: i64,
+    /// Start from this checkpoint's networks and normalizer (a specialist from the walker).
+    pub init_checkpoint: Option<String>,
+    /// Stop early when the mean episode return stays NaN or the loss is NaN.
+    pub stop_on_nan: bool,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        TrainConfig {
+            iterations: 1000,
+            save_interval: 50,
+            keep_interval: 0,
+            seed: 1,
+            torch_threads: 1,
+            init_checkpoint: None,
+            stop_on_nan: true,
+        }
+    }
+}
+
+/// Lane evaluation (`dreampolicy eval`).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EvalConfig {
+    /// Commanded forward speed drawn per episode from `[lo, hi]` (m/s).
+    pub lin_vel_x: [f64; 2],
+    /// Lane length (m); the paper's is 10.
+    pub lane_length: f64,
+    /// Time limit per episode (s).
+    pub time_limit_s: f64,
+    /// Terrain level of the lanes.
+    pub level: usize,
+    /// Envs run in parallel.
+    pub n_envs: i64,
+}
+
+impl Default for EvalConfig {
+    fn default() -> Self {
+        EvalConfig {
+            lin_vel_x: [0.5, 1.0],
+            lane_length: 10.0,
+            time_limit_s: 30.0,
+            level: 5,
+            n_envs: 20,
+        }
+    }
+}
+
+impl PolicyConfig {
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let bad = |m: String| Err(ConfigError::Invalid(m));
+        for (what, dims) in [
+            ("policy.actor_hidden", &self.actor_hidden),
+            ("policy.critic_hidden", &self.critic_hidden),
+            ("policy.history.mlp_dims", &self.history.mlp_dims),
+            ("policy.scan_encoder.dims", &self.scan_encoder.dims),
+        ] {
+            if dims.is_empty() || dims.iter().any(|&d| d <= 0) {
+                return bad(format!(
+                    "{what} must be a non-empty list of positive sizes, got {dims:?}"
+                ));
+            }
+        }
+        if self.history.kind != HistoryKind::None && self.history.length == 0 {
+            return bad("policy.history.length must be >= 1 when a history encoder is used".into());
+        }
+        if self.history.gru_hidden <= 0 {
+            return bad("policy.history.gru_hidden must be positive".into());
+        }
+        if !(self.init_std > 0.0 && self.min_std > 0.0 && self.min_std <= self.init_std) {
+            return bad(format!(
+                "policy.init_std and policy.min_std must be positive with min_std <= init_std, got {} and {}",
+                self.init_std, self.min_std
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl PpoConfig {
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let bad = |m: String| Err(ConfigError::Invalid(m));
+        if self.num_steps == 0 || self.num_epochs == 0 || self.num_minibatches == 0 {
+            return bad(
+                "ppo.num_steps, ppo.num_epochs and ppo.num_minibatches must be >= 1".into(),
+            );
+        }
+        if !(0.0..=1.0).contains(&self.gamma) || !(0.0..=1.0).contains(&self.lam) {
+            return bad(format!(
+                "ppo.gamma and ppo.lam must be in [0, 1], got {} and {}",
+                self.gamma, self.lam
+            ));
+        }
+        if !(self.learning_rate > 0.0 && self.clip_param > 0.0 && self.max_grad_norm > 0.0) {
+            return bad(
+                "ppo.learning_rate, ppo.clip_param and ppo.max_grad_norm must be positive".into(),
+            );
+        }
+        if self.desired_kl.is_nan() || self.desired_kl <= 0.0 {
+            return bad("ppo.desired_kl must be positive".into());
+        }
+        Ok(())
+    }
+}
+
+impl TrainConfig {
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if self.torch_threads <= 0 {
+            return Err(ConfigError::Invalid(format!(
+                "train.torch_threads must be positive, got {}",
+                self.torch_threads
+            )));
+        }
+        Ok(())
+    }
+}
+
+impl EvalConfig {
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let v = self.lin_vel_x;
+        if v[0].is_nan() || v[1].is_nan() || v[0] > v[1] {
+            return Err(ConfigError::Invalid(format!(
+                "eval.lin_vel_x must be [lo, hi] with lo <= hi, got {v:?}"
+            )));
+        }
+        if !(self.lane_length > 0.0 && self.time_limit_s > 0.0) || self.n_envs <= 0 {
+            return Err(ConfigError::Invalid(
+                "eval.lane_length, eval.time_limit_s and eval.n_envs must be positive".into(),
+            ));
+        }
+        Ok(())
+    }
+}

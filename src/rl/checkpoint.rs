@@ -1,0 +1,199 @@
+//! Checkpoints: one file of named tensors (networks, Adam moments, normalizer
+//! statistics) plus a JSON record (iteration, env-steps, wall time, the resolved
+//! config, every env's RNG and curriculum level). Written to a temporary name and
+//! renamed, so a kill at any moment leaves the previous checkpoint loadable.
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use tch::{Kind, Tensor};
+
+use super::agent::Agent;
+use super::normalizer::RunningNorm;
+use super::optim::Adam;
+use super::task::{EnvSnapshot, TaskDims};
+use super::RlError;
+
+/// Bumped when the layout changes.
+pub const FORMAT: u32 = 1;
+
+/// The JSON record of a checkpoint.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct CheckpointMeta {
+    pub format: u32,
+    /// PPO iterations done.
+    pub iteration: usize,
+    pub env_steps: u64,
+    pub wall_time_s: f64,
+    pub adam_step: i64,
+    pub learning_rate: f64,
+    pub dims: TaskDims,
+    pub n_envs: usize,
+    /// The resolved experiment config (YAML).
+    pub config: String,
+    pub snapshots: Vec<EnvSnapshot>,
+    pub mujoco_version: String,
+    pub libtorch_version: String,
+    /// Mean episode return over the last 100 episodes at save time (None before
+    /// the first episode ended).
+    pub mean_return: Option<f64>,
+    /// Returns and lengths of the last (up to 100) episodes, for the logs of a resumed run.
+    pub episode_window: (Vec<f64>, Vec<f64>),
+}
+
+/// A checkpoint read from disk.
+pub struct Checkpoint {
+    pub path: PathBuf,
+    pub meta: CheckpointMeta,
+    tensors: HashMap<String, Tensor>,
+}
+
+fn err(path: &Path, message: impl Into<String>) -> RlError {
+    RlError::Checkpoint {
+        path: path.to_path_buf(),
+        message: message.into(),
+    }
+}
+
+fn f64_tensor(v: &[f64]) -> Tensor {
+    Tensor::from_slice(v)
+}
+
+/// Write `agent` (and `opt`) with `meta` to `path` atomically.
+pub fn save(
+    path: &Path,
+    agent: &Agent,
+    opt: Option<&Adam>,
+    meta: &CheckpointMeta,
+) -> Result<(), RlError> {
+    let mut named: Vec<(String, Tensor)> = Vec::new();
+    for (name, t) in agent.policy.named_parameters() {
+        named.push((format!("policy.{name}"), t.detach()));
+    }
+    if let Some(opt) = opt {
+        for (i, name) in opt.names().enumerate() {
+            named.push((format!("adam_m.{name}"), opt.m[i].shallow_clone()));
+            named.push((format!("adam_v.{name}"), opt.v[i].shallow_clone()));
+        }
+    }
+    named.push(("norm.obs".into(), f64_tensor(&agent.obs_norm.to_vec())));
+    named.push((
+        "norm.critic".into(),
+        f64_tensor(&agent.critic_norm.to_vec()),
+    ));
+    named.push(("norm.scan".into(), f64_tensor(&agent.scan_norm.to_vec())));
+    let json = serde_json::to_vec(meta).map_err(|e| err(path, e.to_string()))?;
+    named.push(("meta".into(), Tensor::from_slice(&json)));
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).map_err(|source| RlError::Io {
+            path: dir.to_path_buf(),
+            source,
+        })?;
+    }
+    let tmp = path.with_extension("pt.tmp");
+    Tensor::save_multi(&named, &tmp)?;
+    // flush the data before the rename makes it the checkpoint
+    std::fs::File::open(&tmp)
+        .and_then(|f| f.sync_all())
+        .map_err(|source| RlError::Io {
+            path: tmp.clone(),
+            source,
+        })?;
+    std::fs::rename(&tmp, path).map_err(|source| RlError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+impl Checkpoint {
+    /// Read a checkpoint; a missing, truncated or foreign file is one clear error.
+    pub fn read(path: &Path) -> Result<Checkpoint, RlError> {
+        if !path.is_file() {
+            return Err(err(path, "no such file"));
+        }
+        let list = Tensor::load_multi(path)
+            .map_err(|e| err(path, format!("not a readable checkpoint ({e})")))?;
+        let tensors: HashMap<String, Tensor> = list.into_iter().collect();
+        let meta_t = tensors
+            .get("meta")
+            .ok_or_else(|| err(path, "no 'meta' record: not a dreampolicy checkpoint"))?;
+        let bytes = Vec::<u8>::try_from(&meta_t.to_kind(Kind::Uint8))
+            .map_err(|e| err(path, e.to_string()))?;
+        let meta: CheckpointMeta = serde_json::from_slice(&bytes)
+            .map_err(|e| err(path, format!("bad meta record: {e}")))?;
+        if meta.format != FORMAT {
+            return Err(err(
+                path,
+                format!("format {} (this build reads {FORMAT})", meta.format),
+            ));
+        }
+        Ok(Checkpoint {
+            path: path.to_path_buf(),
+            meta,
+            tensors,
+        })
+    }
+
+    /// The resolved config stored in the checkpoint.
+    pub fn config(&self) -> Result<crate::config::ExperimentConfig, RlError> {
+        Ok(crate::config::from_str(
+            &self.meta.config,
+            &format!("{} (stored config)", self.path.display()),
+            &[],
+        )?)
+    }
+
+    fn tensor(&self, name: &str) -> Result<&Tensor, RlError> {
+        self.tensors
+            .get(name)
+            .ok_or_else(|| err(&self.path, format!("missing tensor '{name}'")))
+    }
+
+    /// Copy the networks and normalizers into `agent` (same architecture).
+    pub fn load_agent(&self, agent: &mut Agent) -> Result<(), RlError> {
+        for (name, mut var) in agent.policy.named_parameters() {
+            let src = self.tensor(&format!("policy.{name}"))?;
+            if src.size() != var.size() {
+                return Err(err(
+                    &self.path,
+                    format!(
+                        "tensor '{name}' has shape {:?}, the configured policy needs {:?}",
+                        src.size(),
+                        var.size()
+                    ),
+                ));
+            }
+            tch::no_grad(|| var.copy_(src));
+        }
+        let d = agent.dims();
+        for (key, dim, slot) in [
+            ("norm.obs", d.obs, &mut agent.obs_norm),
+            ("norm.critic", d.critic, &mut agent.critic_norm),
+            ("norm.scan", d.scan, &mut agent.scan_norm),
+        ] {
+            let v = Vec::<f64>::try_from(&self.tensor(key)?.to_kind(Kind::Double))
+                .map_err(|e| err(&self.path, e.to_string()))?;
+            let frozen = slot.frozen;
+            *slot = RunningNorm::from_vec(dim, &v)
+                .ok_or_else(|| err(&self.path, format!("'{key}' does not fit {dim} dims")))?;
+            slot.frozen = frozen;
+        }
+        Ok(())
+    }
+
+    /// Restore Adam's moments and step.
+    pub fn load_optimizer(&self, opt: &mut Adam) -> Result<(), RlError> {
+        let names: Vec<String> = opt.names().map(String::from).collect();
+        for (i, name) in names.iter().enumerate() {
+            let m = self.tensor(&format!("adam_m.{name}"))?;
+            let v = self.tensor(&format!("adam_v.{name}"))?;
+            tch::no_grad(|| {
+                opt.m[i].copy_(m);
+                opt.v[i].copy_(v);
+            });
+        }
+        opt.step = self.meta.adam_step;
+        opt.lr = self.meta.learning_rate;
+        Ok(())
+    }
+}

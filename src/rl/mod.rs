@@ -1,0 +1,46 @@
+//! Reinforcement learning on libtorch: PPO (rsl_rl's four steps: act, process a
+//! step, compute returns, update), its rollout storage, the actor-critic, running
+//! observation normalization, checkpoints, and the runner's learn loop.
+//!
+//! The runner trains any [`VecTask`]: the G1 locomotion `VecEnv`, or the small
+//! cart-pole that tests PPO end to end.
+pub mod agent;
+pub mod checkpoint;
+pub mod normalizer;
+pub mod optim;
+pub mod policy;
+pub mod ppo;
+pub mod runner;
+pub mod storage;
+pub mod task;
+
+pub use agent::Agent;
+pub use policy::ActorCritic;
+pub use task::{TaskDims, VecTask};
+
+use std::path::PathBuf;
+
+/// Errors of training, evaluation and checkpoints.
+#[derive(Debug, thiserror::Error)]
+pub enum RlError {
+    #[error("libtorch: {0}")]
+    Torch(#[from] tch::TchError),
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("checkpoint {path}: {message}")]
+    Checkpoint { path: PathBuf, message: String },
+    #[error(transparent)]
+    Env(#[from] crate::env::EnvError),
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
+    #[error(transparent)]
+    Run(#[from] crate::run::RunError),
+    #[error("training diverged: {0}")]
+    NonFinite(String),
+    #[error("{0}")]
+    Invalid(String),
+}

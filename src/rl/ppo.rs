@@ -1,0 +1,167 @@
+//! PPO's update (clipped surrogate, clipped value loss, entropy bonus, global
+//! gradient clipping, adaptive-KL learning rate as rsl_rl has it), over the
+//! minibatches of one rollout.
+use rand::seq::SliceRandom;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::Serialize;
+use tch::{Kind, Tensor};
+
+use super::optim::Adam;
+use super::policy::ActorCritic;
+use super::storage::RolloutStorage;
+use crate::config::{LrSchedule, PpoConfig};
+
+/// Mean losses and diagnostics of one update.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Losses {
+    pub value: f64,
+    pub surrogate: f64,
+    pub entropy: f64,
+    /// Mean KL(old || new) over the minibatches.
+    pub kl: f64,
+    /// Fraction of samples whose ratio left [1 - clip, 1 + clip].
+    pub clip_fraction: f64,
+    /// 1 - Var(returns - values) / Var(returns), on the rollout's values.
+    pub explained_variance: f64,
+    pub learning_rate: f64,
+    pub grad_norm: f64,
+    pub mean_std: f64,
+}
+
+/// PPO: its hyperparameters and optimizer.
+pub struct Ppo {
+    pub cfg: PpoConfig,
+    pub opt: Adam,
+}
+
+fn tensor(v: &[f32], rows: i64) -> Tensor {
+    Tensor::from_slice(v).view([rows, -1])
+}
+
+impl Ppo {
+    pub fn new(cfg: &PpoConfig, policy: &ActorCritic) -> Ppo {
+        Ppo {
+            cfg: cfg.clone(),
+            opt: Adam::new(policy.named_parameters(), cfg.learning_rate),
+        }
+    }
+
+    /// Update on a full storage; `seed` orders the minibatches.
+    pub fn update(&mut self, policy: &ActorCritic, st: &RolloutStorage, seed: u64) -> Losses {
+        let c = &self.cfg;
+        let b = (st.filled * st.n) as i64;
+        let actor_in = tensor(&st.actor_in, b);
+        let critic_in = tensor(&st.critic_in, b);
+        let scan = policy.uses_scan().then(|| tensor(&st.scan, b));
+        let actions = tensor(&st.actions, b);
+        let old_mean = tensor(&st.mean, b);
+        let old_logp = Tensor::from_slice(&st.log_probs);
+        let old_values = Tensor::from_slice(&st.values);
+        let returns = Tensor::from_slice(&st.returns);
+        let mut adv = Tensor::from_slice(&st.advantages);
+        if c.normalize_advantage {
+            adv = (&adv - adv.mean(Kind::Float)) / (adv.std(true) + 1e-8);
+        }
+        let old_std = tch::no_grad(|| policy.std());
+        let explained_variance = {
+            let var_r = returns.var(true).double_value(&[]);
+            let var_e = (&returns - &old_values).var(true).double_value(&[]);
+            if var_r > 0.0 {
+                1.0 - var_e / var_r
+            } else {
+                f64::NAN
+            }
+        };
+
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut order: Vec<i64> = (0..b).collect();
+        let mb = (b as usize / c.num_minibatches).max(1);
+        let mut l = Losses {
+            explained_variance,
+            ..Default::default()
+        };
+        let mut count = 0.0;
+        for _ in 0..c.num_epochs {
+            order.shuffle(&mut rng);
+            for chunk in order.chunks(mb) {
+                let idx = Tensor::from_slice(chunk);
+                let pick = |t: &Tensor| t.index_select(0, &idx);
+                let scan_mb = scan.as_ref().map(pick);
+                let mean = policy.actor_mean(&pick(&actor_in), scan_mb.as_ref());
+                let std = policy.std();
+                let logp = ActorCritic::log_prob(&mean, &std, &pick(&actions));
+                let entropy = ActorCritic::entropy(&std);
+                let value = policy.value(&pick(&critic_in), scan_mb.as_ref());
+
+                // KL(old || new) of diagonal Gaussians, and the adaptive learning rate
+                let kl = tch::no_grad(|| {
+                    let om = pick(&old_mean);
+                    ((&std / &old_std).log()
+                        + (old_std.square() + (om - &mean).square()) / (std.square() * 2.0)
+                        - 0.5)
+                        .sum_dim_intlist(-1, false, Kind::Float)
+                        .mean(Kind::Float)
+                        .double_value(&[])
+                });
+                if c.schedule == LrSchedule::Adaptive && kl.is_finite() {
+                    if kl > c.desired_kl * 2.0 {
+                        self.opt.lr = (self.opt.lr / 1.5).max(1e-5);
+                    } else if kl < c.desired_kl / 2.0 && kl > 0.0 {
+                        self.opt.lr = (self.opt.lr * 1.5).min(1e-2);
+                    }
+                }
+
+                let ratio = (&logp - pick(&old_logp)).exp();
+                let a = pick(&adv);
+                let surr = -(&a * &ratio);
+                let surr_clipped = -(&a * ratio.clamp(1.0 - c.clip_param, 1.0 + c.clip_param));
+                let surrogate = surr.max_other(&surr_clipped).mean(Kind::Float);
+                let ret = pick(&returns);
+                let value_loss = if c.clip_value {
+                    let ov = pick(&old_values);
+                    let clipped = &ov + (&value - &ov).clamp(-c.clip_param, c.clip_param);
+                    (&value - &ret)
+                        .square()
+                        .max_other(&(clipped - &ret).square())
+                        .mean(Kind::Float)
+                } else {
+                    (&value - &ret).square().mean(Kind::Float)
+                };
+                let loss = &surrogate + &value_loss * c.value_loss_coef - &entropy * c.entropy_coef;
+                self.opt.zero_grad();
+                loss.backward();
+                l.grad_norm += self.opt.clip_grad_norm(c.max_grad_norm);
+                self.opt.step();
+
+                let clipped_frac = tch::no_grad(|| {
+                    (&ratio - 1.0)
+                        .abs()
+                        .gt(c.clip_param)
+                        .to_kind(Kind::Float)
+                        .mean(Kind::Float)
+                        .double_value(&[])
+                });
+                l.value += value_loss.double_value(&[]);
+                l.surrogate += surrogate.double_value(&[]);
+                l.entropy += entropy.double_value(&[]);
+                l.kl += kl;
+                l.clip_fraction += clipped_frac;
+                count += 1.0;
+            }
+        }
+        for v in [
+            &mut l.value,
+            &mut l.surrogate,
+            &mut l.entropy,
+            &mut l.kl,
+            &mut l.clip_fraction,
+            &mut l.grad_norm,
+        ] {
+            *v /= count;
+        }
+        l.learning_rate = self.opt.lr;
+        l.mean_std = tch::no_grad(|| policy.std().mean(Kind::Float).double_value(&[]));
+        l
+    }
+}

@@ -1,0 +1,541 @@
+//! The learn loop (rsl_rl's `OnPolicyRunner.learn`): roll out `num_steps` per
+//! env, bootstrap time-outs from their final observations, compute GAE returns,
+//! update, log one CSV row, checkpoint.
+//!
+//! Checkpoints are taken at an episode boundary of every env: right after a
+//! checkpoint is written, every env is reset (the cut episodes count as
+//! time-outs, bootstrapped like any other). A checkpoint therefore needs only
+//! the networks, Adam, the normalizers, and each env's RNG and curriculum level,
+//! and a resumed run continues exactly as the uninterrupted one (same seed and
+//! thread counts: bit-identical; tested).
+use std::collections::VecDeque;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use serde::Serialize;
+
+use super::agent::Agent;
+use super::checkpoint::{self, Checkpoint, CheckpointMeta};
+use super::ppo::{Losses, Ppo};
+use super::storage::{RolloutStorage, Transition};
+use super::task::VecTask;
+use super::RlError;
+use crate::config::ExperimentConfig;
+use crate::run::{Progress, RunDir};
+
+/// Columns of `metrics.csv` before the per-term rewards (`rew_<term>`).
+pub const COLUMNS: [&str; 25] = [
+    "iteration",
+    "env_steps",
+    "wall_time_s",
+    "mean_return",
+    "mean_episode_length",
+    "episodes",
+    "fall_fraction",
+    "vel_error_xy",
+    "vel_error_yaw",
+    "value_loss",
+    "surrogate_loss",
+    "entropy",
+    "kl",
+    "clip_fraction",
+    "explained_variance",
+    "learning_rate",
+    "mean_std",
+    "grad_norm",
+    "env_steps_per_s",
+    "time_physics_s",
+    "time_inference_s",
+    "time_update_s",
+    "terrain_level",
+    "blowups",
+    "mean_step_reward",
+];
+
+/// Where a run stands at its end.
+#[derive(Debug, Clone, Serialize)]
+pub struct TrainSummary {
+    pub iterations: usize,
+    pub env_steps: u64,
+    pub wall_time_s: f64,
+    pub mean_return: f64,
+    pub mean_episode_length: f64,
+    pub checkpoint: PathBuf,
+}
+
+/// Seconds spent per phase.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct PhaseTimes {
+    pub physics: f64,
+    pub inference: f64,
+    pub update: f64,
+}
+
+/// The latest resume checkpoint of a run directory.
+pub fn latest_checkpoint(run_dir: &Path) -> PathBuf {
+    run_dir.join("checkpoints").join("latest.pt")
+}
+
+/// Episode statistics over a window of recent episodes.
+struct EpisodeStats {
+    ret: Vec<f64>,
+    len: Vec<u64>,
+    window_ret: VecDeque<f64>,
+    window_len: VecDeque<f64>,
+}
+
+impl EpisodeStats {
+    fn new(n: usize) -> EpisodeStats {
+        EpisodeStats {
+            ret: vec![0.0; n],
+            len: vec![0; n],
+            window_ret: VecDeque::new(),
+            window_len: VecDeque::new(),
+        }
+    }
+    fn reset(&mut self) {
+        self.ret.iter_mut().for_each(|r| *r = 0.0);
+        self.len.iter_mut().for_each(|l| *l = 0);
+    }
+    fn mean(v: &VecDeque<f64>) -> f64 {
+        if v.is_empty() {
+            f64::NAN
+        } else {
+            v.iter().sum::<f64>() / v.len() as f64
+        }
+    }
+}
+
+/// Everything one training run holds.
+pub struct Trainer<'a, T: VecTask> {
+    pub cfg: ExperimentConfig,
+    pub task: &'a mut T,
+    pub agent: Agent,
+    pub ppo: Ppo,
+    storage: RolloutStorage,
+    pub iteration: usize,
+    pub env_steps: u64,
+    /// Wall time of earlier sessions of this run (resume).
+    wall_offset: f64,
+    pub times: PhaseTimes,
+    stats: EpisodeStats,
+}
+
+impl<'a, T: VecTask> Trainer<'a, T> {
+    /// A fresh run (or one resumed from `resume`), seeded from `cfg.train.seed`.
+    pub fn new(
+        cfg: &ExperimentConfig,
+        task: &'a mut T,
+        resume: Option<&Checkpoint>,
+    ) -> Result<Trainer<'a, T>, RlError> {
+        tch::set_num_threads(cfg.train.torch_threads as i32);
+        tch::manual_seed(cfg.train.seed as i64);
+        let n = task.n_envs();
+        let mut agent = Agent::new(&cfg.policy, task.dims(), n, cfg.ppo.normalize_obs);
+        let init = match (&cfg.train.init_checkpoint, resume) {
+            (Some(path), None) => Some(Checkpoint::read(Path::new(path))?),
+            _ => None,
+        };
+        if let Some(ck) = &init {
+            ck.load_agent(&mut agent)?;
+        }
+        let mut ppo = Ppo::new(&cfg.ppo, &agent.policy);
+        let d = task.dims();
+        let (mut iteration, mut env_steps, mut wall_offset) = (0, 0, 0.0);
+        if let Some(ck) = resume {
+            let m = &ck.meta;
+            if m.n_envs != n || m.dims != d {
+                return Err(RlError::Invalid(format!(
+                    "{}: saved for {} envs of {:?}, this run has {n} of {d:?}",
+                    ck.path.display(),
+                    m.n_envs,
+                    m.dims
+                )));
+            }
+            ck.load_agent(&mut agent)?;
+            ck.load_optimizer(&mut ppo.opt)?;
+            task.restore(&m.snapshots)
+                .map_err(|e| RlError::Invalid(format!("{}: {e}", ck.path.display())))?;
+            task.reset_all();
+            (iteration, env_steps, wall_offset) = (m.iteration, m.env_steps, m.wall_time_s);
+        }
+        let mut stats = EpisodeStats::new(n);
+        if let Some(ck) = resume {
+            stats.window_ret = ck.meta.episode_window.0.iter().copied().collect();
+            stats.window_len = ck.meta.episode_window.1.iter().copied().collect();
+        }
+        agent.check_task(&*task).map_err(RlError::Invalid)?;
+        agent.reset_history(&*task);
+        let storage = RolloutStorage::new(
+            cfg.ppo.num_steps,
+            n,
+            [agent.policy.actor_input_dim(), d.critic, d.scan, d.action],
+        );
+        Ok(Trainer {
+            cfg: cfg.clone(),
+            task,
+            agent,
+            ppo,
+            storage,
+            iteration,
+            env_steps,
+            wall_offset,
+            times: PhaseTimes::default(),
+            stats,
+        })
+    }
+
+    /// One PPO iteration: rollout, returns, update. Returns the losses and the
+    /// iteration's rollout statistics.
+    pub fn iterate(&mut self) -> Result<(Losses, RolloutStats), RlError> {
+        let c = self.cfg.ppo.clone();
+        let seed = self.cfg.train.seed;
+        tch::manual_seed(
+            (seed as i64)
+                .wrapping_mul(1_000_003)
+                .wrapping_add(self.iteration as i64),
+        );
+        let n = self.task.n_envs();
+        let mut rs = RolloutStats::default();
+        let mut rewards = vec![0.0f32; n];
+        let mut dones = vec![0.0f32; n];
+        let mut term_sums: Vec<f64> = vec![0.0; self.task.reward_names().len()];
+        let mut term_count = 0usize;
+        self.storage.clear();
+        for _ in 0..c.num_steps {
+            let t0 = Instant::now();
+            self.agent.prepare(&*self.task);
+            let act = self.agent.act(true);
+            let t1 = Instant::now();
+            let info = self.task.step(&act.actions);
+            let t2 = Instant::now();
+            rs.blowups += info.blowups;
+            rs.step_reward += info.mean_reward;
+            let outcomes = self.task.outcomes();
+            let any_truncated = outcomes.iter().any(|o| o.truncated);
+            let boot = any_truncated.then(|| {
+                self.agent
+                    .values_of(self.task.final_critic(), self.task.final_scan())
+            });
+            for (i, o) in outcomes.iter().enumerate() {
+                let mut r = o.reward;
+                if o.truncated {
+                    if let Some(b) = &boot {
+                        r += c.gamma as f32 * b[i];
+                    }
+                }
+                rewards[i] = r;
+                dones[i] = o.episode_done as u8 as f32;
+                self.stats.ret[i] += o.reward as f64;
+                self.stats.len[i] += 1;
+                if o.episode_done {
+                    rs.episodes += 1;
+                    rs.falls += o.terminated as usize;
+                    push_window(&mut self.stats.window_ret, self.stats.ret[i]);
+                    push_window(&mut self.stats.window_len, self.stats.len[i] as f64);
+                    self.stats.ret[i] = 0.0;
+                    self.stats.len[i] = 0;
+                }
+            }
+            if let Some(terms) = self.task.finished_episode_terms() {
+                let k = outcomes.iter().filter(|o| o.episode_done).count();
+                for (s, (_, v)) in term_sums.iter_mut().zip(terms) {
+                    *s += v * k as f64;
+                }
+                term_count += k;
+            }
+            let e = self.task.tracking_errors();
+            rs.vel_error[0] += e[0];
+            rs.vel_error[1] += e[1];
+            self.storage
+                .add(&Transition {
+                    actor_in: &self.agent.actor_in,
+                    critic_in: &self.agent.critic_in,
+                    scan: &self.agent.scan_in,
+                    actions: &act.actions,
+                    log_probs: &act.log_probs,
+                    values: &act.values,
+                    mean: &act.mean,
+                    rewards: &rewards,
+                    dones: &dones,
+                })
+                .map_err(RlError::Invalid)?;
+            self.agent.after_step(&*self.task);
+            let t3 = Instant::now();
+            self.times.inference += (t1 - t0).as_secs_f64() + (t3 - t2).as_secs_f64();
+            self.times.physics += (t2 - t1).as_secs_f64();
+        }
+        let t0 = Instant::now();
+        self.agent.prepare(&*self.task);
+        let last = self.agent.act(false).values;
+        self.storage
+            .compute_returns(&last, c.gamma as f32, c.lam as f32);
+        let t1 = Instant::now();
+        let losses = self.ppo.update(
+            &self.agent.policy,
+            &self.storage,
+            seed ^ (self.iteration as u64).wrapping_mul(0x9E37_79B9),
+        );
+        self.times.inference += (t1 - t0).as_secs_f64();
+        self.times.update += t1.elapsed().as_secs_f64();
+        self.iteration += 1;
+        self.env_steps += (c.num_steps * n) as u64;
+        let steps = c.num_steps as f64;
+        rs.vel_error = [rs.vel_error[0] / steps, rs.vel_error[1] / steps];
+        rs.step_reward /= steps;
+        rs.terms = term_sums
+            .iter()
+            .map(|s| {
+                if term_count > 0 {
+                    s / term_count as f64
+                } else {
+                    f64::NAN
+                }
+            })
+            .collect();
+        rs.mean_return = EpisodeStats::mean(&self.stats.window_ret);
+        rs.mean_length = EpisodeStats::mean(&self.stats.window_len);
+        rs.level = self.task.mean_level();
+        for (what, v) in [
+            ("value loss", losses.value),
+            ("surrogate loss", losses.surrogate),
+            ("action std", losses.mean_std),
+        ] {
+            if !v.is_finite() && self.cfg.train.stop_on_nan {
+                return Err(RlError::NonFinite(format!(
+                    "{what} is {v} at iteration {}",
+                    self.iteration
+                )));
+            }
+        }
+        Ok((losses, rs))
+    }
+
+    /// Write the resume checkpoint, then start every env on a new episode (module doc).
+    pub fn checkpoint(&mut self, path: &Path, wall: f64) -> Result<(), RlError> {
+        let meta = CheckpointMeta {
+            format: checkpoint::FORMAT,
+            iteration: self.iteration,
+            env_steps: self.env_steps,
+            wall_time_s: self.wall_offset + wall,
+            adam_step: self.ppo.opt.step,
+            learning_rate: self.ppo.opt.lr,
+            dims: self.task.dims(),
+            n_envs: self.task.n_envs(),
+            config: serde_yaml::to_string(&self.cfg)
+                .map_err(|e| RlError::Invalid(e.to_string()))?,
+            snapshots: self.task.snapshot(),
+            mujoco_version: crate::sim::mujoco_version(),
+            libtorch_version: env!("DREAMPOLICY_LIBTORCH_VERSION").to_string(),
+            mean_return: Some(EpisodeStats::mean(&self.stats.window_ret)).filter(|r| r.is_finite()),
+            episode_window: (
+                self.stats.window_ret.iter().copied().collect(),
+                self.stats.window_len.iter().copied().collect(),
+            ),
+        };
+        checkpoint::save(path, &self.agent, Some(&self.ppo.opt), &meta)?;
+        self.task.reset_all();
+        self.agent.reset_history(&*self.task);
+        self.stats.reset();
+        Ok(())
+    }
+
+    /// Wall time of the whole run so far, given this session's elapsed seconds.
+    pub fn wall_time(&self, session: f64) -> f64 {
+        self.wall_offset + session
+    }
+}
+
+fn push_window(w: &mut VecDeque<f64>, v: f64) {
+    if w.len() == 100 {
+        w.pop_front();
+    }
+    w.push_back(v);
+}
+
+/// What one iteration's rollout saw.
+#[derive(Debug, Clone, Default)]
+pub struct RolloutStats {
+    pub episodes: usize,
+    pub falls: usize,
+    pub blowups: usize,
+    /// Mean over the last 100 episodes.
+    pub mean_return: f64,
+    pub mean_length: f64,
+    pub vel_error: [f64; 2],
+    pub step_reward: f64,
+    pub level: f64,
+    /// Per-term episode means (per second of episode), in `reward_names` order.
+    pub terms: Vec<f64>,
+}
+
+/// Train to `cfg.train.iterations` in `run`, from scratch or from `resume`;
+/// metrics rows, progress, checkpoints every `save_interval`.
+pub fn learn<T: VecTask>(
+    cfg: &ExperimentConfig,
+    task: &mut T,
+    run: &mut RunDir,
+    resume: Option<&Checkpoint>,
+    quiet: bool,
+) -> Result<TrainSummary, RlError> {
+    let mut tr = Trainer::new(cfg, task, resume)?;
+    let total = cfg.train.iterations;
+    let ckpt = latest_checkpoint(run.path());
+    let progress = Progress::new("train", total as u64, quiet);
+    let start = Instant::now();
+    let first = tr.iteration;
+    run.log(&format!(
+        "start at iteration {first} of {total}: {} envs x {} steps, {} parameters",
+        tr.task.n_envs(),
+        cfg.ppo.num_steps,
+        tr.agent.policy.num_parameters()
+    ))?;
+    let mut last = (f64::NAN, f64::NAN);
+    while tr.iteration < total {
+        let it_start = Instant::now();
+        let before = tr.times;
+        let (l, rs) = tr.iterate()?;
+        let dt = it_start.elapsed().as_secs_f64();
+        let n_steps = (cfg.ppo.num_steps * tr.task.n_envs()) as f64;
+        let wall = tr.wall_time(start.elapsed().as_secs_f64());
+        let mut row = vec![
+            tr.iteration as f64,
+            tr.env_steps as f64,
+            wall,
+            rs.mean_return,
+            rs.mean_length,
+            rs.episodes as f64,
+            if rs.episodes > 0 {
+                rs.falls as f64 / rs.episodes as f64
+            } else {
+                f64::NAN
+            },
+            rs.vel_error[0],
+            rs.vel_error[1],
+            l.value,
+            l.surrogate,
+            l.entropy,
+            l.kl,
+            l.clip_fraction,
+            l.explained_variance,
+            l.learning_rate,
+            l.mean_std,
+            l.grad_norm,
+            n_steps / dt,
+            tr.times.physics - before.physics,
+            tr.times.inference - before.inference,
+            tr.times.update - before.update,
+            rs.level,
+            rs.blowups as f64,
+            rs.step_reward,
+        ];
+        row.extend(&rs.terms);
+        run.metrics_row(&row)?;
+        last = (rs.mean_return, rs.mean_length);
+        progress.set(
+            (tr.iteration) as u64,
+            &format!(
+                "return {:.2} len {:.0} {:.0} steps/s [phys {:.2}s inf {:.2}s upd {:.2}s]",
+                rs.mean_return,
+                rs.mean_length,
+                n_steps / dt,
+                tr.times.physics - before.physics,
+                tr.times.inference - before.inference,
+                tr.times.update - before.update
+            ),
+        );
+        let si = cfg.train.save_interval;
+        if (si > 0 && tr.iteration % si == 0) || tr.iteration == total {
+            tr.checkpoint(&ckpt, start.elapsed().as_secs_f64())?;
+            let ki = cfg.train.keep_interval;
+            if ki > 0 && tr.iteration % ki == 0 {
+                let keep = run
+                    .path()
+                    .join("checkpoints")
+                    .join(format!("iter_{:06}.pt", tr.iteration));
+                std::fs::copy(&ckpt, &keep).map_err(|source| RlError::Io { path: keep, source })?;
+            }
+            run.log(&format!(
+                "iteration {} env_steps {} wall {:.0}s return {:.3} length {:.1}: checkpoint {}",
+                tr.iteration,
+                tr.env_steps,
+                wall,
+                rs.mean_return,
+                rs.mean_length,
+                ckpt.display()
+            ))?;
+        }
+    }
+    progress.finish();
+    let t = tr.times;
+    run.log(&format!(
+        "done: {} iterations this session, physics {:.1}s inference {:.1}s update {:.1}s",
+        tr.iteration - first,
+        t.physics,
+        t.inference,
+        t.update
+    ))?;
+    Ok(TrainSummary {
+        iterations: tr.iteration,
+        env_steps: tr.env_steps,
+        wall_time_s: tr.wall_time(start.elapsed().as_secs_f64()),
+        mean_return: last.0,
+        mean_episode_length: last.1,
+        checkpoint: ckpt,
+    })
+}
+
+/// Metrics columns of a task: [`COLUMNS`] then `rew_<term>`.
+pub fn columns(task: &dyn VecTask) -> Vec<String> {
+    COLUMNS
+        .iter()
+        .map(|c| c.to_string())
+        .chain(task.reward_names().iter().map(|n| format!("rew_{n}")))
+        .collect()
+}
+
+/// Build the config's task and train it in `run_dir` (fresh, or resumed from the
+/// run's latest checkpoint when `resume`). The G1 env or the cart-pole.
+pub fn train(
+    cfg: &ExperimentConfig,
+    run_dir: &Path,
+    resume: bool,
+    quiet: bool,
+) -> Result<TrainSummary, RlError> {
+    use crate::config::TaskKind;
+    match cfg.task {
+        TaskKind::G1 => {
+            let mut env = crate::env::VecEnv::new(&cfg.env)?;
+            train_task(cfg, &mut env, run_dir, resume, quiet)
+        }
+        TaskKind::Cartpole => {
+            let (n, _) = cfg.env.counts();
+            let mut env = crate::env::cartpole::CartPole::new(n, cfg.env.seed)?;
+            train_task(cfg, &mut env, run_dir, resume, quiet)
+        }
+    }
+}
+
+fn train_task<T: VecTask>(
+    cfg: &ExperimentConfig,
+    task: &mut T,
+    run_dir: &Path,
+    resume: bool,
+    quiet: bool,
+) -> Result<TrainSummary, RlError> {
+    let cols = columns(task);
+    let cols: Vec<&str> = cols.iter().map(|s| s.as_str()).collect();
+    let (mut run, ck) = if resume {
+        let ck = Checkpoint::read(&latest_checkpoint(run_dir))?;
+        let run = RunDir::resume(run_dir, cfg, &cols, ck.meta.iteration as f64)?;
+        (run, Some(ck))
+    } else {
+        (RunDir::create(run_dir, cfg, &cols)?, None)
+    };
+    let s = learn(cfg, task, &mut run, ck.as_ref(), quiet)?;
+    run.log(&format!(
+        "summary {}",
+        serde_json::to_string(&s).unwrap_or_default()
+    ))?;
+    Ok(s)
+}

@@ -1,0 +1,121 @@
+//! `VecTask`: what the PPO runner needs from a batch of environments. The G1
+//! `VecEnv` implements it; so does the cart-pole of `env::cartpole`.
+use serde::{Deserialize, Serialize};
+
+use crate::env::{Outcome, StepInfo, VecEnv};
+
+/// Sizes of a task's buffers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TaskDims {
+    /// Actor observation per env.
+    pub obs: usize,
+    /// Critic observation per env.
+    pub critic: usize,
+    /// Scandots per env (0 when the task has none).
+    pub scan: usize,
+    pub action: usize,
+}
+
+/// What a checkpoint keeps of one env to restart it exactly: its RNG and its
+/// curriculum level. Checkpoints are taken at an episode boundary of every env
+/// (the runner resets them all right after saving), so nothing else is needed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EnvSnapshot {
+    pub rng_seed: [u8; 32],
+    pub rng_stream: u64,
+    pub rng_word_pos: u128,
+    pub level: usize,
+}
+
+/// A batch of environments over contiguous `[n, dim]` f32 buffers with auto-reset.
+pub trait VecTask {
+    fn dims(&self) -> TaskDims;
+    fn n_envs(&self) -> usize;
+    /// Actor observations `[n, obs]` after the last step.
+    fn obs(&self) -> &[f32];
+    fn critic(&self) -> &[f32];
+    /// Scandots `[n, scan]` (empty when `dims().scan == 0`).
+    fn scan(&self) -> &[f32];
+    /// Critic observations and scandots at the end of the episodes that ended in
+    /// the last step (for bootstrapping truncations); other rows are stale.
+    fn final_critic(&self) -> &[f32];
+    fn final_scan(&self) -> &[f32];
+    fn outcomes(&self) -> &[Outcome];
+    fn step(&mut self, actions: &[f32]) -> StepInfo;
+    /// Reset every env and write first observations.
+    fn reset_all(&mut self);
+    fn snapshot(&self) -> Vec<EnvSnapshot>;
+    /// Restore RNGs and levels (then call [`VecTask::reset_all`]).
+    fn restore(&mut self, snaps: &[EnvSnapshot]) -> Result<(), String>;
+    /// Names of the logged reward terms.
+    fn reward_names(&self) -> Vec<&'static str>;
+    /// Per-term means over the episodes that ended in the last step (per second).
+    fn finished_episode_terms(&self) -> Option<Vec<(&'static str, f64)>>;
+    /// Mean planar velocity and yaw-rate tracking errors of the batch now (NaN if none).
+    fn tracking_errors(&self) -> [f64; 2];
+    fn mean_level(&self) -> f64;
+}
+
+impl VecTask for VecEnv {
+    fn dims(&self) -> TaskDims {
+        use crate::env::obs::{CRITIC_DIM, OBS_DIM, SCAN_DIM};
+        TaskDims {
+            obs: OBS_DIM,
+            critic: CRITIC_DIM,
+            scan: SCAN_DIM,
+            action: crate::robot::NUM_JOINTS,
+        }
+    }
+    fn n_envs(&self) -> usize {
+        VecEnv::n_envs(self)
+    }
+    fn obs(&self) -> &[f32] {
+        &self.obs
+    }
+    fn critic(&self) -> &[f32] {
+        &self.critic
+    }
+    fn scan(&self) -> &[f32] {
+        &self.scan
+    }
+    fn final_critic(&self) -> &[f32] {
+        &self.final_critic
+    }
+    fn final_scan(&self) -> &[f32] {
+        &self.final_scan
+    }
+    fn outcomes(&self) -> &[Outcome] {
+        &self.outcomes
+    }
+    fn step(&mut self, actions: &[f32]) -> StepInfo {
+        VecEnv::step(self, actions)
+    }
+    fn reset_all(&mut self) {
+        VecEnv::reset_all(self)
+    }
+    fn snapshot(&self) -> Vec<EnvSnapshot> {
+        VecEnv::snapshot(self)
+    }
+    fn restore(&mut self, snaps: &[EnvSnapshot]) -> Result<(), String> {
+        VecEnv::restore(self, snaps)
+    }
+    fn reward_names(&self) -> Vec<&'static str> {
+        self.shared().rewards.names()
+    }
+    fn finished_episode_terms(&self) -> Option<Vec<(&'static str, f64)>> {
+        VecEnv::finished_episode_terms(self)
+    }
+    fn tracking_errors(&self) -> [f64; 2] {
+        let n = self.envs().len() as f64;
+        let mut e = [0.0; 2];
+        for env in self.envs() {
+            let s = env.state();
+            e[0] += (s.command[0] - s.base_lin_vel[0]).hypot(s.command[1] - s.base_lin_vel[1]);
+            e[1] += (s.command[2] - s.base_ang_vel[2]).abs();
+        }
+        [e[0] / n, e[1] / n]
+    }
+    fn mean_level(&self) -> f64 {
+        self.mean_terrain_level()
+    }
+}

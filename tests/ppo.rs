@@ -1,0 +1,263 @@
+//! PPO end to end: it balances the MuJoCo cart-pole, a resumed run is
+//! bit-identical to an uninterrupted one (cart-pole and the G1), a kill -9 while
+//! checkpointing leaves a loadable checkpoint, and the pieces (GAE, storage,
+//! normalizer, checkpoint errors) on hand-made data.
+mod common;
+
+use std::process::{Command, Stdio};
+
+use common::{load_config, Scratch};
+use dreampolicy::rl::checkpoint::Checkpoint;
+use dreampolicy::rl::normalizer::RunningNorm;
+use dreampolicy::rl::runner::{self, latest_checkpoint};
+use dreampolicy::rl::storage::{RolloutStorage, Transition};
+
+/// Training seeds libtorch's global generator and sets its thread count: the
+/// tests that train take turns.
+static TORCH: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn torch_lock() -> std::sync::MutexGuard<'static, ()> {
+    TORCH.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+fn metrics(dir: &std::path::Path) -> Vec<Vec<String>> {
+    let text = std::fs::read_to_string(dir.join("metrics.csv")).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    // everything but the timing columns
+    let keep: Vec<usize> = header
+        .iter()
+        .enumerate()
+        .filter(|(_, h)| !h.contains("time") && !h.contains("per_s"))
+        .map(|(i, _)| i)
+        .collect();
+    lines
+        .map(|l| {
+            let v: Vec<&str> = l.split(',').collect();
+            keep.iter().map(|&i| v[i].to_string()).collect()
+        })
+        .collect()
+}
+
+fn column(dir: &std::path::Path, name: &str) -> Vec<f64> {
+    let text = std::fs::read_to_string(dir.join("metrics.csv")).unwrap();
+    let mut lines = text.lines();
+    let i = lines
+        .next()
+        .unwrap()
+        .split(',')
+        .position(|h| h == name)
+        .unwrap();
+    lines
+        .map(|l| l.split(',').nth(i).unwrap().parse().unwrap())
+        .collect()
+}
+
+#[test]
+fn ppo_balances_the_cartpole() {
+    let _t = torch_lock();
+    let dir = Scratch::new("cartpole");
+    let cfg = load_config("test/cartpole.yaml", &[]);
+    let s = runner::train(&cfg, &dir.0, false, true).unwrap();
+    assert_eq!(s.iterations, 60);
+    let ret = column(&dir.0, "mean_return");
+    let first = ret.iter().copied().find(|r| r.is_finite()).unwrap();
+    // the best return is 200 (the episode's length); random actions fall in ~30 steps
+    assert!(first < 80.0, "first return {first}");
+    assert!(
+        s.mean_return > 150.0,
+        "return after 60 iterations: {}",
+        s.mean_return
+    );
+    // the checkpoint reloads into a policy that balances on its own, deterministically
+    let ck = Checkpoint::read(&s.checkpoint).unwrap();
+    assert_eq!(ck.meta.iteration, 60);
+    assert_eq!(ck.meta.env_steps, 60 * 32 * 16);
+}
+
+fn resume_matches(config: &str) {
+    let _t = torch_lock();
+    let (a, b) = (Scratch::new("full"), Scratch::new("resumed"));
+    let cfg = load_config(config, &[]);
+    let total = cfg.train.iterations;
+    runner::train(&cfg, &a.0, false, true).unwrap();
+    // stop at a checkpoint of the full run (every save_interval), then resume
+    let mut half = cfg.clone();
+    half.train.iterations = cfg.train.save_interval;
+    assert!(half.train.iterations < total);
+    runner::train(&half, &b.0, false, true).unwrap();
+    assert_eq!(metrics(&b.0).len(), half.train.iterations);
+    runner::train(&cfg, &b.0, true, true).unwrap();
+    let (ma, mb) = (metrics(&a.0), metrics(&b.0));
+    assert_eq!(ma.len(), total);
+    assert_eq!(mb.len(), total);
+    if let Some(i) = (0..total).find(|&i| ma[i] != mb[i]) {
+        panic!(
+            "the resumed run differs from the uninterrupted one at row {}:\n{:?}\n{:?}",
+            i + 1,
+            ma[i],
+            mb[i]
+        );
+    }
+    let (ca, cb) = (
+        Checkpoint::read(&latest_checkpoint(&a.0)).unwrap(),
+        Checkpoint::read(&latest_checkpoint(&b.0)).unwrap(),
+    );
+    assert_eq!(ca.meta.snapshots, cb.meta.snapshots);
+    assert_eq!(ca.meta.adam_step, cb.meta.adam_step);
+}
+
+#[test]
+fn resumed_cartpole_run_is_bit_identical() {
+    resume_matches("test/cartpole.yaml");
+}
+
+#[test]
+fn resumed_g1_run_is_bit_identical() {
+    resume_matches("test/g1_tiny.yaml");
+}
+
+#[test]
+fn kill_9_while_checkpointing_leaves_a_loadable_checkpoint() {
+    let dir = Scratch::new("kill9");
+    let run = dir.0.join("run");
+    let bin = env!("CARGO_BIN_EXE_dreampolicy");
+    let config =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/test/cartpole.yaml");
+    let ck = latest_checkpoint(&run);
+    let modified = |p: &std::path::Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
+    for (attempt, extra_ms) in [0u64, 7, 13, 29, 41].into_iter().enumerate() {
+        let mut cmd = Command::new(bin);
+        cmd.args([
+            "train",
+            "specialist",
+            "--quiet",
+            "--set",
+            "train.save_interval=1",
+        ])
+        .args(["--set", "train.iterations=100000"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null());
+        if attempt == 0 {
+            cmd.arg("--config").arg(&config).arg("--out").arg(&run);
+        } else {
+            cmd.arg("--resume").arg(&run);
+        }
+        let before = modified(&ck);
+        let mut child = cmd.spawn().unwrap();
+        // wait until this process has written a checkpoint (one per iteration),
+        // then kill it at an arbitrary moment of the next ones
+        let start = std::time::Instant::now();
+        while modified(&ck) == before {
+            assert!(start.elapsed().as_secs() < 120, "no checkpoint written");
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        std::thread::sleep(std::time::Duration::from_millis(extra_ms));
+        child.kill().unwrap(); // SIGKILL
+        child.wait().unwrap();
+        let c = Checkpoint::read(&ck).unwrap_or_else(|e| panic!("after kill {}: {e}", attempt + 1));
+        assert!(c.meta.iteration >= 1);
+    }
+    // checkpoints were written (one per iteration) and the last one resumes
+    let c = Checkpoint::read(&latest_checkpoint(&run)).unwrap();
+    assert!(c.meta.iteration > 1, "iteration {}", c.meta.iteration);
+}
+
+#[test]
+fn broken_checkpoints_are_clear_errors() {
+    let dir = Scratch::new("badck");
+    let missing = Checkpoint::read(&dir.0.join("none.pt"))
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        missing.contains("none.pt") && missing.contains("no such file"),
+        "{missing}"
+    );
+    let junk = dir.write("junk.pt", "not a checkpoint");
+    let e = Checkpoint::read(&junk).err().unwrap().to_string();
+    assert!(
+        e.contains("junk.pt") && e.contains("not a readable checkpoint"),
+        "{e}"
+    );
+    // a checkpoint cut in half
+    let _t = torch_lock();
+    let cfg = load_config("test/cartpole.yaml", &["train.iterations=2"]);
+    let run = dir.0.join("run");
+    runner::train(&cfg, &run, false, true).unwrap();
+    let bytes = std::fs::read(latest_checkpoint(&run)).unwrap();
+    let cut = dir.0.join("cut.pt");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    let e = Checkpoint::read(&cut).err().unwrap().to_string();
+    assert!(e.contains("cut.pt"), "{e}");
+}
+
+#[test]
+fn gae_matches_a_hand_computation() {
+    // 1 env, 3 steps, gamma 0.5, lambda 0.5; the episode ends after step 1
+    let mut st = RolloutStorage::new(3, 1, [1, 1, 0, 1]);
+    let (r, v, d) = ([1.0f32, 2.0, 3.0], [0.5f32, 1.0, 2.0], [0.0f32, 1.0, 0.0]);
+    for k in 0..3 {
+        st.add(&Transition {
+            actor_in: &[0.0],
+            critic_in: &[0.0],
+            scan: &[],
+            actions: &[0.0],
+            log_probs: &[0.0],
+            values: &v[k..k + 1],
+            mean: &[0.0],
+            rewards: &r[k..k + 1],
+            dones: &d[k..k + 1],
+        })
+        .unwrap();
+    }
+    assert!(
+        st.add(&Transition {
+            actor_in: &[0.0],
+            critic_in: &[0.0],
+            scan: &[],
+            actions: &[0.0],
+            log_probs: &[0.0],
+            values: &[0.0],
+            mean: &[0.0],
+            rewards: &[0.0],
+            dones: &[0.0],
+        })
+        .is_err(),
+        "a full storage refuses more steps"
+    );
+    st.compute_returns(&[4.0], 0.5, 0.5);
+    // step 2: delta = 3 + 0.5*4 - 2 = 3; A = 3
+    // step 1 (done): delta = 2 - 1 = 1; A = 1
+    // step 0: delta = 1 + 0.5*1 - 0.5 = 1; A = 1 + 0.25*1 = 1.25
+    let close = |a: f32, b: f32| (a - b).abs() < 1e-6;
+    assert!(
+        close(st.advantages[2], 3.0)
+            && close(st.advantages[1], 1.0)
+            && close(st.advantages[0], 1.25),
+        "{:?}",
+        st.advantages
+    );
+    assert!(close(st.returns[0], 1.75) && close(st.returns[1], 2.0) && close(st.returns[2], 5.0));
+}
+
+#[test]
+fn normalizer_tracks_mean_and_variance_across_batches() {
+    let mut n = RunningNorm::new(2);
+    let data: Vec<f32> = (0..200)
+        .flat_map(|i| [i as f32, 3.0 - 0.5 * i as f32])
+        .collect();
+    n.update(&data[..100]);
+    n.update(&data[100..]);
+    let mean0 = (0..200).map(|i| i as f64).sum::<f64>() / 200.0;
+    let var0 = (0..200).map(|i| (i as f64 - mean0).powi(2)).sum::<f64>() / 200.0;
+    assert!((n.mean[0] - mean0).abs() < 1e-9 && (n.var[0] - var0).abs() < 1e-6);
+    assert!(
+        (n.mean[1] - (3.0 - 0.5 * mean0)).abs() < 1e-9 && (n.var[1] - 0.25 * var0).abs() < 1e-6
+    );
+    let mut out = [0.0f32; 2];
+    n.apply(&[mean0 as f32, (3.0 - 0.5 * mean0) as f32], &mut out);
+    assert!(out.iter().all(|v| v.abs() < 1e-5));
+    let back = RunningNorm::from_vec(2, &n.to_vec()).unwrap();
+    assert_eq!(back.mean, n.mean);
+}
