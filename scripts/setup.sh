@@ -7,6 +7,8 @@
 #        third_party/libtorch/torch      libtorch 2.13 for tch 0.26 (+ nvidia/ runtime libs)
 #        third_party/mujoco-3.3.7        MuJoCo 3.3.7 headers + library (MUJOCO_DIR build)
 #        models/unitree_g1               the Unitree G1 29-DOF MJCF + meshes (from mjlab)
+#      and models/unitree_g1/g1_armature.xml: the vendor g1.xml with joint armature from
+#      models/g1/armature.txt (scripts/g1_armature.py; rewritten only when stale)
 #   3. cargo build --release
 #
 # Env: SKIP_BUILD=1 skips step 3; DREAMPOLICY_WHEEL_CACHE=<dir> reuses downloaded wheels.
@@ -97,6 +99,8 @@ if [ ! -f models/unitree_g1/.done ]; then
   (cd models/unitree_g1 && sha256sum -c --quiet "$ROOT/models/g1/vendor.sha256")
   touch models/unitree_g1/.done
 fi
+# every run: regenerates the file if it is missing or differs from what the table gives
+"$PY" scripts/g1_armature.py
 
 # --- 3. Build -------------------------------------------------------------------
 if [ "${SKIP_BUILD:-0}" != "1" ]; then
