@@ -8,10 +8,12 @@
 //! * [`env`] the locomotion env and the batched `VecEnv`
 //! * [`config`] serde structs of the YAML experiment files
 //! * [`run`] run directories (config.yaml, metrics.csv, log.txt) and progress bars
+//! * [`plot`] PNG training curves (a grid of line-chart panels) from a metrics CSV
 //! * [`bench`] the `dreampolicy bench ...` measurements
 pub mod bench;
 pub mod config;
 pub mod env;
+pub mod plot;
 pub mod robot;
 pub mod run;
 pub mod sim;
