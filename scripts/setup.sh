@@ -2,11 +2,14 @@
 # dreampolicy: one-command setup on a fresh Debian 12 machine. Idempotent: a
 # second run checks what is there and only redoes what is missing.
 #
-#   1. Debian packages: libmujoco-dev (MuJoCo 2.2.2), clang/libclang (bindgen), unzip, python3-pip
+#   1. Debian packages: libmujoco-dev (MuJoCo 2.2.2), clang/libclang (bindgen), unzip, python3-pip,
+#      fonts-dejavu-core (the TrueType font of the training-curve PNGs, src/plot.rs)
 #   2. Registry wheels pinned by hash (scripts/wheels.lock), unpacked, never imported:
 #        third_party/libtorch/torch      libtorch 2.13 for tch 0.26 (+ nvidia/ runtime libs)
 #        third_party/mujoco-3.3.7        MuJoCo 3.3.7 headers + library (MUJOCO_DIR build)
 #        models/unitree_g1               the Unitree G1 29-DOF MJCF + meshes (from mjlab)
+#      and models/unitree_g1/g1_armature.xml: the vendor g1.xml with joint armature from
+#      models/g1/armature.txt (scripts/g1_armature.py; rewritten only when stale)
 #   3. cargo build --release
 #
 # Env: SKIP_BUILD=1 skips step 3; DREAMPOLICY_WHEEL_CACHE=<dir> reuses downloaded wheels.
@@ -17,7 +20,7 @@ cd "$ROOT"
 log() { printf '[setup] %s\n' "$*"; }
 
 # --- 1. Debian packages -------------------------------------------------------
-APT_PKGS=(libmujoco-dev libclang-dev clang pkg-config unzip python3 python3-pip ca-certificates curl build-essential)
+APT_PKGS=(libmujoco-dev libclang-dev clang pkg-config unzip python3 python3-pip ca-certificates curl build-essential fonts-dejavu-core)
 missing=()
 for p in "${APT_PKGS[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
@@ -97,6 +100,8 @@ if [ ! -f models/unitree_g1/.done ]; then
   (cd models/unitree_g1 && sha256sum -c --quiet "$ROOT/models/g1/vendor.sha256")
   touch models/unitree_g1/.done
 fi
+# every run: regenerates the file if it is missing or differs from what the table gives
+"$PY" scripts/g1_armature.py
 
 # --- 3. Build -------------------------------------------------------------------
 if [ "${SKIP_BUILD:-0}" != "1" ]; then

@@ -9,10 +9,12 @@
 //! * [`rl`] PPO on libtorch: actor-critic, storage, normalizers, checkpoints, runner
 //! * [`config`] serde structs of the YAML experiment files
 //! * [`run`] run directories (config.yaml, metrics.csv, log.txt) and progress bars
+//! * [`plot`] PNG training curves (a grid of line-chart panels) from a metrics CSV
 //! * [`bench`] the `dreampolicy bench ...` measurements
 pub mod bench;
 pub mod config;
 pub mod env;
+pub mod plot;
 pub mod rl;
 pub mod robot;
 pub mod run;

@@ -1,5 +1,6 @@
 //! The G1 scene: it loads, its joint order is ours, it stands under zero action
-//! and falls without gains.
+//! and falls without gains, and the scene file alone (as stock MuJoCo loads it)
+//! carries the motor table's armature and stands too.
 use std::sync::Arc;
 
 use dreampolicy::robot::{self, G1, JOINT_NAMES, NUM_JOINTS};
@@ -44,7 +45,7 @@ fn robot_facts_are_consistent() {
             JOINT_NAMES[i]
         );
         assert!(g1.kp[i] > 0.0 && g1.kd[i] > 0.0 && g1.effort_limit[i] > 0.0);
-        // armature written by the loader from the motor table
+        // armature from the scene files (generated vendor copy) = the motor table
         let a = m.dof_armature()[g1.dof_adr[i]];
         assert_eq!(a, robot::motor(i).armature());
         assert!(a > 1e-3 && a < 0.05, "{} armature {a}", JOINT_NAMES[i]);
@@ -98,4 +99,104 @@ fn falls_with_zero_gains() {
     let h = stand(&Arc::new(model), &g1, 3.0);
     let end = *h.last().unwrap();
     assert!(end < 0.4, "pelvis still at {end:.3} m without gains");
+}
+
+/// The scene file as stock MuJoCo loads it: no loader, no check.
+fn stock_flat() -> (Arc<Model>, G1) {
+    robot::check_vendor_files().expect("run scripts/setup.sh");
+    let model = Model::from_xml_path(robot::flat_scene_xml()).unwrap();
+    let g1 = G1::resolve(&model).unwrap();
+    (Arc::new(model), g1)
+}
+
+#[test]
+fn scene_file_alone_stands_for_ten_seconds() {
+    let (m, g1) = stock_flat();
+    // hold the keyframe's own ctrl
+    let mut d = Data::new(m.clone()).unwrap();
+    d.reset_keyframe(g1.stand_key).unwrap();
+    let key_ctrl = m.key_ctrl(g1.stand_key).unwrap().to_vec();
+    d.forward();
+    let start = d.xpos()[g1.pelvis];
+    assert_eq!(start[2], g1.stand_height);
+    let steps = (10.0 / m.timestep()).round() as usize;
+    let (mut worst_z, mut worst_xy) = (0.0f64, 0.0f64);
+    for _ in 0..steps {
+        d.ctrl_mut().copy_from_slice(&key_ctrl);
+        d.step().unwrap();
+        let p = d.xpos()[g1.pelvis];
+        worst_z = worst_z.max((p[2] - start[2]).abs());
+        worst_xy = worst_xy.max((p[0] - start[0]).hypot(p[1] - start[1]));
+    }
+    // height as in stands_for_ten_seconds_with_zero_action; horizontally the pose
+    // leans forward by up to ~4.9 cm in the first second, then settles at ~2.7 cm
+    assert!(worst_z < 0.05, "pelvis height moved {worst_z:.3} m");
+    assert!(worst_xy < 0.10, "pelvis moved {worst_xy:.3} m horizontally");
+}
+
+#[test]
+fn scene_file_without_armature_collapses() {
+    // the control for the test above: what the vendor file alone gives
+    let (m, g1) = stock_flat();
+    let mut m = (*m).clone();
+    for i in 0..NUM_JOINTS {
+        m.dof_armature_mut()[g1.dof_adr[i]] = 0.0;
+    }
+    let h = stand(&Arc::new(m), &g1, 3.0);
+    let end = *h.last().unwrap();
+    assert!(end < g1.stand_height - 0.3, "pelvis still at {end:.3} m");
+}
+
+/// `models/g1/armature.txt` as (joint, armature, motor) rows.
+fn armature_table() -> Vec<(String, f64, String)> {
+    let text = std::fs::read_to_string(robot::armature_table()).unwrap();
+    text.lines()
+        .map(|l| l.split('#').next().unwrap().trim())
+        .filter(|l| !l.is_empty())
+        .map(|l| {
+            let c: Vec<&str> = l.split_whitespace().collect();
+            assert_eq!(c.len(), 3, "row {l:?}");
+            (c[0].to_string(), c[1].parse().unwrap(), c[2].to_string())
+        })
+        .collect()
+}
+
+#[test]
+fn armature_table_and_scene_file_equal_the_motor_table() {
+    let table = armature_table();
+    let expected: Vec<(String, f64, String)> = (0..NUM_JOINTS)
+        .map(|i| {
+            let mot = robot::motor(i);
+            (
+                JOINT_NAMES[i].to_string(),
+                mot.armature(),
+                format!("{mot:?}"),
+            )
+        })
+        .collect();
+    let rows: String = expected
+        .iter()
+        .map(|(j, a, mot)| format!("{j} {a} {mot}\n"))
+        .collect();
+    assert_eq!(table, expected, "models/g1/armature.txt must read:\n{rows}");
+
+    // bit for bit in the compiled scene file, without any loader
+    let (m, g1) = stock_flat();
+    for i in 0..NUM_JOINTS {
+        let a = m.dof_armature()[g1.dof_adr[i]];
+        assert_eq!(a, robot::motor(i).armature(), "{}", JOINT_NAMES[i]);
+    }
+    // nothing else has armature (the free joint's dofs)
+    assert!(m.dof_armature()[..6].iter().all(|&a| a == 0.0));
+    robot::check_armature(&m).unwrap();
+}
+
+#[test]
+fn check_armature_names_the_joint_that_differs() {
+    let (m, g1) = stock_flat();
+    let mut m = (*m).clone();
+    m.dof_armature_mut()[g1.dof_adr[3]] *= 1.01;
+    let err = robot::check_armature(&m).unwrap_err().to_string();
+    assert!(err.contains(JOINT_NAMES[3]), "{err}");
+    assert!(err.contains("scripts/setup.sh"), "{err}");
 }

@@ -202,13 +202,13 @@ pub fn scene_xml(cfg: &EnvConfig, terrain: Option<&TerrainMap>) -> String {
     )
 }
 
-/// Compile the scene of `cfg` on `terrain` (heightfield data uploaded, armature
-/// and collision settings applied): the nominal model of the buckets.
+/// Compile the scene of `cfg` on `terrain` (armature checked, heightfield data
+/// uploaded, collision settings applied): the nominal model of the buckets.
 fn compile(cfg: &EnvConfig, terrain: Option<&TerrainMap>) -> Result<(Model, G1), EnvError> {
     let xml = scene_xml(cfg, terrain);
     let dir = robot::models_dir().join("g1");
     let mut model = Model::from_xml_str(&xml, &dir, "generated G1 scene")?;
-    robot::apply_armature(&mut model)?;
+    robot::check_armature(&model)?;
     let g1 = G1::resolve(&model)?;
     if let Some(map) = terrain {
         let geom = model.id(ObjType::Geom, "terrain")?;

@@ -45,6 +45,17 @@ pub enum SimError {
     /// A heightfield value or geometry that MuJoCo cannot represent.
     #[error("heightfield: {0}")]
     Hfield(String),
+    /// A G1 joint's armature in the compiled model is not its motor's (robot::check_armature).
+    #[error(
+        "model {model}: joint {joint} has armature {found}, the motor table says {expected}; \
+         run scripts/setup.sh to regenerate models/unitree_g1/g1_armature.xml"
+    )]
+    Armature {
+        model: String,
+        joint: String,
+        found: f64,
+        expected: f64,
+    },
     /// The simulation blew up; the env layer resets and counts it.
     #[error("simulation unstable at t = {time:.3} s: {reason}")]
     Unstable { time: f64, reason: Instability },
