@@ -133,6 +133,7 @@ fn weighted_sum_uses_dt_and_keeps_episode_sums() {
         terms,
         params: RewardParams::default(),
         only_positive: false,
+        penalty_curriculum: None,
     };
     let set = RewardSet::new(&cfg).unwrap();
     assert_eq!(set.names(), vec!["alive", "orientation"]);
@@ -151,6 +152,14 @@ fn weighted_sum_uses_dt_and_keeps_episode_sums() {
     .unwrap();
     s.gravity = [1.0, 0.0, 0.0];
     close(clipped.compute(&s, &mut sums), 0.0);
+    // the penalty curriculum scales negative weights only
+    let mut scaled = RewardSet::new(&cfg).unwrap();
+    scaled.penalty_scale = 0.25;
+    s.gravity = [0.3, 0.0, -0.95];
+    close(
+        scaled.compute(&s, &mut sums),
+        (2.0 - 0.25 * 10.0 * 0.09) * 0.02,
+    );
 
     let mut bad = cfg;
     bad.terms.insert("fly".into(), 1.0);

@@ -217,6 +217,10 @@ impl Default for InitConfig {
 pub struct ControlConfig {
     pub action_scale: f64,
     pub clip_actions: f64,
+    /// Per-joint scale `action_scale * effort_limit / kp` (mjlab's G1): an action
+    /// of 1 asks for `action_scale` of the joint's torque limit, whatever its
+    /// stiffness. Off: `action_scale` radians for every joint.
+    pub scale_by_effort: bool,
 }
 
 impl Default for ControlConfig {
@@ -224,6 +228,7 @@ impl Default for ControlConfig {
         ControlConfig {
             action_scale: 0.25,
             clip_actions: 10.0,
+            scale_by_effort: false,
         }
     }
 }
@@ -349,6 +354,23 @@ pub struct RewardConfig {
     /// Clip the per-step total at zero from below (legged_gym's only_positive_rewards).
     #[serde(default)]
     pub only_positive: bool,
+    /// Scale the penalties (negative weights) up as the policy learns to stay up.
+    #[serde(default)]
+    pub penalty_curriculum: Option<PenaltyCurriculum>,
+}
+
+/// Penalty curriculum: every negative-weight term is multiplied by a scale that
+/// starts at `initial` and rises by `step` (up to 1) after each PPO iteration
+/// whose mean episode length reaches `length_frac` of the time limit. Early on,
+/// a random policy's joint-velocity, acceleration and tumbling penalties outweigh
+/// every positive term, so ending the episode fast is what pays; a small scale
+/// makes staying up pay first.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PenaltyCurriculum {
+    pub initial: f64,
+    pub step: f64,
+    pub length_frac: f64,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -632,6 +654,17 @@ impl EnvConfig {
         }
         if self.domain_rand.friction[0] < 0.0 {
             return bad("env.domain_rand.friction must be non-negative".into());
+        }
+        if let Some(pc) = &self.rewards.penalty_curriculum {
+            if !(0.0..=1.0).contains(&pc.initial)
+                || pc.step.is_nan()
+                || pc.step < 0.0
+                || !(0.0..=1.0).contains(&pc.length_frac)
+            {
+                return bad(format!(
+                    "env.rewards.penalty_curriculum needs initial and length_frac in [0, 1] and step >= 0, got {pc:?}"
+                ));
+            }
         }
         if self.domain_rand.model_buckets == 0 {
             return bad("env.domain_rand.model_buckets must be >= 1".into());

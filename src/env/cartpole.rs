@@ -189,4 +189,7 @@ impl VecTask for CartPole {
     fn mean_level(&self) -> f64 {
         0.0
     }
+    fn max_episode_steps(&self) -> u64 {
+        EPISODE_STEPS
+    }
 }

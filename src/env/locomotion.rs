@@ -2,7 +2,7 @@
 //!
 //! The order of one control step ([`LocoEnv::step`]), in one place:
 //! 1. clip the action, push it into the latency buffer, take the delayed one;
-//! 2. `ctrl = q_default + action_scale * a_delayed` (MuJoCo's PD actuators, torques
+//! 2. `ctrl = q_default + action_scale[j] * a_delayed` (MuJoCo's PD actuators, torques
 //!    clipped to the effort limits by `forcerange`);
 //! 3. `decimation` physics steps, each checked for a blow-up;
 //! 4. derive the state (`EnvState`): pelvis, joints, torques, feet contacts and air
@@ -48,6 +48,16 @@ pub struct LocoEnv {
     fatal_contact: bool,
     /// Bound to a Flat column and stepping on the plane models (scene doc).
     on_plane: bool,
+    /// Pelvis position, spawn point and command when the last episode ended.
+    last_end: EpisodeEnd,
+}
+
+/// Where the last finished episode ended (evaluation reads it after the reset).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct EpisodeEnd {
+    pub base_pos: [f64; 3],
+    pub spawn: [f64; 3],
+    pub command: [f64; 3],
 }
 
 /// Where one env writes its outputs (its rows of the batch buffers).
@@ -98,6 +108,7 @@ impl LocoEnv {
             past_goal: false,
             fatal_contact: false,
             on_plane,
+            last_end: EpisodeEnd::default(),
         };
         env.reset(sh);
         Ok(env)
@@ -132,6 +143,16 @@ impl LocoEnv {
     /// Action latency of the current episode (control steps).
     pub fn latency(&self) -> usize {
         self.latency
+    }
+
+    /// Where the last finished episode ended.
+    pub fn last_episode_end(&self) -> EpisodeEnd {
+        self.last_end
+    }
+
+    /// Where the current episode started.
+    pub fn spawn(&self) -> [f64; 3] {
+        self.spawn
     }
 
     /// Per-term reward sums of the last finished episode (order of `RewardSet::names`).
@@ -268,11 +289,10 @@ impl LocoEnv {
         self.actions[0] = s.action;
         let applied = self.actions[self.latency];
         let g1 = &sh.scene.g1;
-        let scale = sh.cfg.control.action_scale;
         {
             let ctrl = self.data.ctrl_mut();
             for i in 0..NUM_JOINTS {
-                ctrl[g1.actuator[i]] = g1.default_pos[i] + scale * applied[i];
+                ctrl[g1.actuator[i]] = g1.default_pos[i] + sh.action_scale[i] * applied[i];
             }
         }
         let mut blowup = false;
@@ -290,6 +310,7 @@ impl LocoEnv {
             out.final_critic.copy_from_slice(out.critic);
             out.final_scan.copy_from_slice(out.scan);
             self.last_sums.copy_from_slice(&self.episode_sums);
+            self.remember_end();
             self.reset(sh);
             self.write_obs(sh, out.obs, out.critic, out.scan);
             return Outcome {
@@ -344,6 +365,7 @@ impl LocoEnv {
             self.write_obs(sh, out.final_obs, out.final_critic, out.final_scan);
             self.update_curriculum(sh);
             self.last_sums.copy_from_slice(&self.episode_sums);
+            self.remember_end();
             self.reset(sh);
         }
         self.write_obs(sh, out.obs, out.critic, out.scan);
@@ -358,6 +380,14 @@ impl LocoEnv {
 }
 
 impl LocoEnv {
+    fn remember_end(&mut self) {
+        self.last_end = EpisodeEnd {
+            base_pos: self.state.base_pos,
+            spawn: self.spawn,
+            command: self.state.command,
+        };
+    }
+
     /// Height of the ground this env's physics sees.
     #[inline]
     pub fn ground(&self, sh: &EnvShared, x: f64, y: f64) -> f64 {

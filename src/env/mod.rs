@@ -10,7 +10,7 @@ pub mod scene;
 pub mod state;
 mod vec_env;
 
-pub use locomotion::LocoEnv;
+pub use locomotion::{EpisodeEnd, LocoEnv};
 pub use scene::Scene;
 pub use state::EnvState;
 pub use vec_env::{StepInfo, VecEnv};
@@ -45,6 +45,8 @@ pub struct EnvShared {
     /// Control steps between pushes (0 = none).
     pub push_steps: u64,
     pub cos_max_tilt: f64,
+    /// `q_target = q_default + action_scale[j] * a_j` (rad per unit action).
+    pub action_scale: [f64; crate::robot::NUM_JOINTS],
 }
 
 impl EnvShared {
@@ -63,6 +65,14 @@ impl EnvShared {
                 0
             },
             cos_max_tilt: cfg.termination.max_tilt_deg.to_radians().cos(),
+            action_scale: std::array::from_fn(|j| {
+                let c = &cfg.control;
+                if c.scale_by_effort {
+                    c.action_scale * scene.g1.effort_limit[j] / scene.g1.kp[j]
+                } else {
+                    c.action_scale
+                }
+            }),
             rewards,
             dt,
             scene,

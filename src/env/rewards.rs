@@ -317,6 +317,8 @@ pub struct RewardSet {
     terms: Vec<(&'static Term, f64)>,
     pub params: RewardParams,
     pub only_positive: bool,
+    /// Multiplier of the negative-weight terms (penalty curriculum; 1 without one).
+    pub penalty_scale: f64,
 }
 
 impl RewardSet {
@@ -338,6 +340,7 @@ impl RewardSet {
             terms,
             params: cfg.params.clone(),
             only_positive: cfg.only_positive,
+            penalty_scale: cfg.penalty_curriculum.as_ref().map_or(1.0, |p| p.initial),
         })
     }
 
@@ -358,6 +361,7 @@ impl RewardSet {
     pub fn compute(&self, s: &EnvState, sums: &mut [f64]) -> f64 {
         let mut total = 0.0;
         for (i, (term, w)) in self.terms.iter().enumerate() {
+            let w = if *w < 0.0 { w * self.penalty_scale } else { *w };
             let r = (term.f)(s, &self.params) * w * s.dt;
             sums[i] += r;
             total += r;

@@ -101,6 +101,11 @@ impl VecEnv {
         self.envs.get_mut(i).map(|e| e.data_mut())
     }
 
+    /// Set the multiplier of the penalty terms (penalty curriculum).
+    pub fn set_penalty_scale(&mut self, scale: f64) {
+        self.shared.rewards.penalty_scale = scale;
+    }
+
     /// RNG state and curriculum level of every env (checkpoints).
     pub fn snapshot(&self) -> Vec<crate::rl::task::EnvSnapshot> {
         self.envs.iter().map(|e| e.snapshot()).collect()

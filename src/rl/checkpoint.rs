@@ -39,6 +39,8 @@ pub struct CheckpointMeta {
     pub mean_return: Option<f64>,
     /// Returns and lengths of the last (up to 100) episodes, for the logs of a resumed run.
     pub episode_window: (Vec<f64>, Vec<f64>),
+    /// Penalty-curriculum scale at save time.
+    pub penalty_scale: f64,
 }
 
 /// A checkpoint read from disk.

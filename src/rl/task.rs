@@ -54,6 +54,13 @@ pub trait VecTask {
     /// Mean planar velocity and yaw-rate tracking errors of the batch now (NaN if none).
     fn tracking_errors(&self) -> [f64; 2];
     fn mean_level(&self) -> f64;
+    /// Multiplier of the penalty terms (penalty curriculum); 1 for tasks without.
+    fn penalty_scale(&self) -> f64 {
+        1.0
+    }
+    fn set_penalty_scale(&mut self, _scale: f64) {}
+    /// Control steps of the episode time limit.
+    fn max_episode_steps(&self) -> u64;
 }
 
 impl VecTask for VecEnv {
@@ -117,5 +124,14 @@ impl VecTask for VecEnv {
     }
     fn mean_level(&self) -> f64 {
         self.mean_terrain_level()
+    }
+    fn penalty_scale(&self) -> f64 {
+        self.shared().rewards.penalty_scale
+    }
+    fn set_penalty_scale(&mut self, scale: f64) {
+        VecEnv::set_penalty_scale(self, scale)
+    }
+    fn max_episode_steps(&self) -> u64 {
+        self.shared().max_episode_steps
     }
 }
