@@ -6,6 +6,7 @@
 //! * [`robot`] G1 facts: joint order, motors, body sets, scene files
 //! * [`terrain`] procedural heightfields: terrain kinds, curriculum map, lanes, PNGs
 //! * [`env`] the locomotion env and the batched `VecEnv`
+//! * [`eval`] lane evaluation: success and completion rates, tracking error
 //! * [`rl`] PPO on libtorch: actor-critic, storage, normalizers, checkpoints, runner
 //! * [`config`] serde structs of the YAML experiment files
 //! * [`run`] run directories (config.yaml, metrics.csv, log.txt) and progress bars
@@ -14,6 +15,7 @@
 pub mod bench;
 pub mod config;
 pub mod env;
+pub mod eval;
 pub mod plot;
 pub mod rl;
 pub mod robot;

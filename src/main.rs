@@ -64,6 +64,42 @@ enum Command {
         #[command(subcommand)]
         which: TrainCommand,
     },
+    /// Evaluate a checkpoint on 10 m lanes: success and completion rates,
+    /// velocity-tracking error, falls.
+    Eval {
+        #[arg(long)]
+        checkpoint: PathBuf,
+        /// Terrain of the lanes.
+        #[arg(long, default_value = "flat")]
+        terrain: String,
+        #[arg(long, default_value_t = 100)]
+        episodes: usize,
+        /// Evaluate on the project's default scene (full collisions, MuJoCo's
+        /// default solver) instead of the checkpoint's training scene.
+        #[arg(long)]
+        full_collision: bool,
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        #[arg(long, default_value_t = 2)]
+        threads: usize,
+        /// Also write the JSON report to this file.
+        #[arg(long)]
+        out: Option<PathBuf>,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Draw a run directory's training curves (plots/training.png) from its metrics.csv.
+    Plot {
+        /// Run directory.
+        run: PathBuf,
+    },
+    /// Export a checkpoint's actor (normalization included) as TorchScript.
+    Export {
+        #[arg(long)]
+        checkpoint: PathBuf,
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Procedural terrains.
     Terrain {
         #[command(subcommand)]
@@ -135,6 +171,22 @@ enum TerrainCommand {
 
 #[derive(Subcommand)]
 enum BenchCommand {
+    /// Time shares of PPO iterations (physics, inference, update) and inference
+    /// against bare GEMMs, for the config's network and the paper's sizes.
+    Ppo {
+        #[arg(long)]
+        json: bool,
+        #[arg(long, default_value = "configs/specialist/flat.yaml")]
+        config: PathBuf,
+        #[arg(long = "set")]
+        sets: Vec<String>,
+        /// Iterations measured per variant (after one warm-up iteration).
+        #[arg(long, default_value_t = 5)]
+        iterations: usize,
+        /// Only the config's network (skip the paper-sized variants).
+        #[arg(long)]
+        config_only: bool,
+    },
     /// Raw mj_step vs our safe Data::step on the standing G1.
     Sim {
         #[arg(long)]
@@ -247,10 +299,87 @@ fn run(cli: Cli) -> Result<()> {
             } => terrain_render(kind, then, level, map, config, sets, seed, out),
         },
         Command::Info { json } => info(json),
+        Command::Eval {
+            checkpoint,
+            terrain,
+            episodes,
+            full_collision,
+            seed,
+            threads,
+            out,
+            json,
+        } => {
+            use dreampolicy::{eval, rl::checkpoint::Checkpoint, terrain::TerrainKind};
+            let terrain = TerrainKind::from_name(&terrain)?;
+            let ck = Checkpoint::read(&checkpoint)?;
+            let opts = eval::EvalOptions {
+                terrain,
+                episodes,
+                full_collision,
+                seed,
+                threads: threads.max(1),
+            };
+            let r = eval::evaluate(&ck, &opts).context("evaluation")?;
+            let text = serde_json::to_string_pretty(&r)?;
+            if let Some(path) = &out {
+                std::fs::write(path, format!("{text}\n"))
+                    .with_context(|| format!("writing {}", path.display()))?;
+            }
+            if json {
+                println!("{}", serde_json::to_string(&r)?);
+            } else {
+                println!(
+                    "{} lanes of {:.0} m ({}): success {:.3}, completion {:.3}, velocity error {:.3} m/s, {} falls, {} time-outs, mean speed {:.2} m/s (commanded {:.2})",
+                    r.episodes, r.lane_length, r.terrain, r.success_rate, r.completion_rate,
+                    r.vel_tracking_error, r.falls, r.timeouts, r.mean_forward_speed, r.mean_commanded_speed
+                );
+            }
+            Ok(())
+        }
+        Command::Plot { run } => {
+            let out = dreampolicy::rl::runner::plot_run(&run)
+                .with_context(|| format!("plotting {}", run.display()))?;
+            println!("{}", out.display());
+            Ok(())
+        }
+        Command::Export { checkpoint, out } => {
+            let ck = dreampolicy::rl::checkpoint::Checkpoint::read(&checkpoint)?;
+            let info = dreampolicy::rl::export::export(&ck, &out).context("export")?;
+            println!("{}", serde_json::to_string(&info)?);
+            Ok(())
+        }
         Command::Train { which } => match which {
             TrainCommand::Specialist(args) => train_specialist(args),
         },
         Command::Bench { which } => match which {
+            BenchCommand::Ppo {
+                json,
+                config,
+                sets,
+                iterations,
+                config_only,
+            } => {
+                let cfg = config::load(&config, &sets)?;
+                let label = config.display().to_string();
+                let r = bench::ppo::ppo(&cfg, &label, 1, iterations.max(1), !config_only)
+                    .context("bench ppo")?;
+                if json {
+                    println!("{}", serde_json::to_string(&r)?);
+                } else {
+                    println!(
+                        "MuJoCo {}, {} torch threads, sgemm {:.0} GFLOP/s",
+                        r.mujoco_version, r.torch_threads, r.sgemm_gflops
+                    );
+                    for v in &r.variants {
+                        println!(
+                            "{:<18} {:>8} params: {:>6.0} env-steps/s; physics {:.2} inference {:.2} update {:.2}; inference/GEMM {:.2}; update {:.0} samples/s",
+                            v.name, v.parameters, v.env_steps_per_s, v.share_physics, v.share_inference,
+                            v.share_update, v.inference_gemm_fraction, v.update_samples_per_s
+                        );
+                    }
+                }
+                Ok(())
+            }
             BenchCommand::Sim {
                 json,
                 steps,
@@ -347,6 +476,11 @@ fn info(json: bool) -> Result<()> {
         "mujoco_version": sim::mujoco_version(),
         "mujoco_header_version": mujoco_sys::MUJOCO_VERSION_HEADER,
         "mujoco_lib_dir": mujoco_sys::MUJOCO_LIB_DIR,
+        "mujoco_build": if mujoco_sys::MUJOCO_LIB_DIR.starts_with("/usr") {
+            "Debian libmujoco-dev (MUJOCO_DIR=system)"
+        } else {
+            "MUJOCO_DIR (default: the MuJoCo 3.3.7 wheel unpacked by setup)"
+        },
         "libtorch_version": env!("DREAMPOLICY_LIBTORCH_VERSION"),
         "torch_device": device,
         "torch_threads": tch::get_num_threads(),

@@ -85,6 +85,11 @@ impl Agent {
         Ok(())
     }
 
+    /// Raw past states `[n, K, obs]`, oldest first (what an exported policy takes).
+    pub fn history(&self) -> &[f32] {
+        &self.history
+    }
+
     /// Freeze or unfreeze the normalizers' statistics.
     pub fn set_frozen(&mut self, frozen: bool) {
         self.obs_norm.frozen = frozen;
@@ -97,6 +102,12 @@ impl Agent {
         for i in 0..self.n {
             self.reset_history_of(i, task.obs());
         }
+    }
+
+    /// Fill env `i`'s history with its current state from `obs` (`[n, obs]`),
+    /// after that env alone was reset.
+    pub fn reset_history_env(&mut self, i: usize, obs: &[f32]) {
+        self.reset_history_of(i, obs);
     }
 
     fn reset_history_of(&mut self, i: usize, obs: &[f32]) {

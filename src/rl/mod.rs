@@ -6,6 +6,7 @@
 //! cart-pole that tests PPO end to end.
 pub mod agent;
 pub mod checkpoint;
+pub mod export;
 pub mod normalizer;
 pub mod optim;
 pub mod policy;

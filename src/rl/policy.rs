@@ -165,15 +165,23 @@ impl ActorCritic {
     pub fn actor_mean(&self, actor_in: &Tensor, scan: Option<&Tensor>) -> Tensor {
         let obs = self.dims.obs as i64;
         let k = self.history_len() as i64;
-        let b = actor_in.size()[0];
         let cur = actor_in.narrow(1, k * obs, obs);
         let mut parts = Vec::with_capacity(3);
         match &self.hist {
             HistEncoder::None => {}
             HistEncoder::Mlp(m) => parts.push(m.forward(&actor_in.narrow(1, 0, k * obs))),
             HistEncoder::Gru(g) => {
-                let seq = actor_in.narrow(1, 0, k * obs).reshape([b, k, obs]);
-                let (out, _) = g.seq(&seq);
+                let seq = actor_in.narrow(1, 0, k * obs).reshape([-1, k, obs]);
+                // zero initial state shaped from the input, so that a traced
+                // (exported) policy keeps a free batch size
+                let h = self.cfg.history.gru_hidden;
+                let h0 = seq
+                    .select(1, 0)
+                    .narrow(1, 0, 1)
+                    .zeros_like()
+                    .repeat([1, h])
+                    .unsqueeze(0);
+                let (out, _) = g.seq_init(&seq, &nn::GRUState(h0));
                 parts.push(out.select(1, k - 1));
             }
         }

@@ -24,7 +24,7 @@ use crate::config::ExperimentConfig;
 use crate::run::{Progress, RunDir};
 
 /// Columns of `metrics.csv` before the per-term rewards (`rew_<term>`).
-pub const COLUMNS: [&str; 25] = [
+pub const COLUMNS: [&str; 26] = [
     "iteration",
     "env_steps",
     "wall_time_s",
@@ -50,6 +50,7 @@ pub const COLUMNS: [&str; 25] = [
     "terrain_level",
     "blowups",
     "mean_step_reward",
+    "penalty_scale",
 ];
 
 /// Where a run stands at its end.
@@ -156,6 +157,7 @@ impl<'a, T: VecTask> Trainer<'a, T> {
             ck.load_optimizer(&mut ppo.opt)?;
             task.restore(&m.snapshots)
                 .map_err(|e| RlError::Invalid(format!("{}: {e}", ck.path.display())))?;
+            task.set_penalty_scale(m.penalty_scale);
             task.reset_all();
             (iteration, env_steps, wall_offset) = (m.iteration, m.env_steps, m.wall_time_s);
         }
@@ -296,6 +298,14 @@ impl<'a, T: VecTask> Trainer<'a, T> {
         rs.mean_return = EpisodeStats::mean(&self.stats.window_ret);
         rs.mean_length = EpisodeStats::mean(&self.stats.window_len);
         rs.level = self.task.mean_level();
+        rs.penalty_scale = self.task.penalty_scale();
+        if let Some(pc) = &self.cfg.env.rewards.penalty_curriculum {
+            let max = self.task.max_episode_steps() as f64;
+            if rs.mean_length >= pc.length_frac * max {
+                let s = (rs.penalty_scale + pc.step).min(1.0);
+                self.task.set_penalty_scale(s);
+            }
+        }
         for (what, v) in [
             ("value loss", losses.value),
             ("surrogate loss", losses.surrogate),
@@ -332,6 +342,7 @@ impl<'a, T: VecTask> Trainer<'a, T> {
                 self.stats.window_ret.iter().copied().collect(),
                 self.stats.window_len.iter().copied().collect(),
             ),
+            penalty_scale: self.task.penalty_scale(),
         };
         checkpoint::save(path, &self.agent, Some(&self.ppo.opt), &meta)?;
         self.task.reset_all();
@@ -367,6 +378,8 @@ pub struct RolloutStats {
     pub level: f64,
     /// Per-term episode means (per second of episode), in `reward_names` order.
     pub terms: Vec<f64>,
+    /// Penalty-curriculum scale during this rollout.
+    pub penalty_scale: f64,
 }
 
 /// Train to `cfg.train.iterations` in `run`, from scratch or from `resume`;
@@ -428,6 +441,7 @@ pub fn learn<T: VecTask>(
             rs.level,
             rs.blowups as f64,
             rs.step_reward,
+            rs.penalty_scale,
         ];
         row.extend(&rs.terms);
         run.metrics_row(&row)?;
@@ -454,6 +468,9 @@ pub fn learn<T: VecTask>(
                     .join("checkpoints")
                     .join(format!("iter_{:06}.pt", tr.iteration));
                 std::fs::copy(&ckpt, &keep).map_err(|source| RlError::Io { path: keep, source })?;
+            }
+            if let Err(e) = plot_run(run.path()) {
+                run.log(&format!("plots not drawn: {e}"))?;
             }
             run.log(&format!(
                 "iteration {} env_steps {} wall {:.0}s return {:.3} length {:.1}: checkpoint {}",
@@ -483,6 +500,42 @@ pub fn learn<T: VecTask>(
         mean_episode_length: last.1,
         checkpoint: ckpt,
     })
+}
+
+/// Draw `plots/training.png` from the run's `metrics.csv`.
+pub fn plot_run(run_dir: &Path) -> Result<PathBuf, crate::plot::PlotError> {
+    use crate::plot::{plot_csv, Panel};
+    let out = run_dir.join("plots").join("training.png");
+    let x = "env_steps";
+    let panels = [
+        Panel::new("episode return (last 100)", x, &["mean_return"]),
+        Panel::new("episode length (steps)", x, &["mean_episode_length"]),
+        Panel::new("tracking error", x, &["vel_error_xy", "vel_error_yaw"]),
+        Panel::new("losses", x, &["value_loss", "surrogate_loss"]),
+        Panel::new("policy", x, &["mean_std", "kl", "clip_fraction"]),
+        Panel::new(
+            "falls and penalty scale",
+            x,
+            &["fall_fraction", "penalty_scale"],
+        ),
+        Panel::new("env-steps/s", x, &["env_steps_per_s"]),
+        Panel::new(
+            "seconds per iteration",
+            x,
+            &["time_physics_s", "time_inference_s", "time_update_s"],
+        ),
+    ];
+    std::fs::create_dir_all(run_dir.join("plots")).map_err(|e| crate::plot::PlotError::Io {
+        path: run_dir.join("plots"),
+        source: e,
+    })?;
+    plot_csv(
+        &run_dir.join("metrics.csv"),
+        &out,
+        &run_dir.display().to_string(),
+        &panels,
+    )?;
+    Ok(out)
 }
 
 /// Metrics columns of a task: [`COLUMNS`] then `rew_<term>`.

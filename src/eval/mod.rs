@@ -1,0 +1,222 @@
+//! Evaluation on the paper's 10 m lanes: success rate (reaching the end line
+//! without a fall, within the time limit), completion rate (distance walked
+//! before a fall or the time limit / lane length), velocity-tracking error and
+//! falls, for a checkpoint's deterministic policy.
+//!
+//! The evaluation scene is the project's default physics (full collisions,
+//! MuJoCo's default solver, no domain randomization, no pushes) unless the
+//! training scene is asked for: a walker trained on the feet-only scene must
+//! pass on the full one (sim-to-sim). Commands: forward speed drawn per episode
+//! from `eval.lin_vel_x`, no sideways speed, heading held along the lane.
+use serde::Serialize;
+
+use crate::config::{CollisionMode, EnvConfig, ExperimentConfig, Integrator, TerrainMode};
+use crate::env::VecEnv;
+use crate::rl::checkpoint::Checkpoint;
+use crate::rl::{Agent, RlError, VecTask};
+use crate::terrain::TerrainKind;
+
+/// What an evaluation measured.
+#[derive(Debug, Clone, Serialize)]
+pub struct EvalReport {
+    pub terrain: String,
+    pub episodes: usize,
+    pub success_rate: f64,
+    pub completion_rate: f64,
+    /// Mean |v_cmd - v| of the planar base velocity over every control step (m/s).
+    pub vel_tracking_error: f64,
+    pub falls: usize,
+    pub timeouts: usize,
+    /// Mean forward speed along the lane over all episodes (m/s).
+    pub mean_forward_speed: f64,
+    pub mean_commanded_speed: f64,
+    pub lane_length: f64,
+    pub full_collision: bool,
+    pub checkpoint: String,
+    pub checkpoint_iteration: usize,
+    pub checkpoint_env_steps: u64,
+    pub mujoco_version: String,
+    pub seed: u64,
+}
+
+/// How to evaluate.
+#[derive(Debug, Clone)]
+pub struct EvalOptions {
+    pub terrain: TerrainKind,
+    pub episodes: usize,
+    /// The project's default scene (full collisions, default solver) instead of
+    /// the checkpoint's training scene.
+    pub full_collision: bool,
+    pub seed: u64,
+    pub threads: usize,
+}
+
+/// The env config of an evaluation, derived from the training config.
+pub fn eval_env_config(cfg: &ExperimentConfig, o: &EvalOptions) -> EnvConfig {
+    let e = &cfg.eval;
+    let mut env = cfg.env.clone();
+    env.n_envs = e.n_envs.min(o.episodes.max(1) as i64);
+    env.threads = o.threads as i64;
+    env.seed = o.seed;
+    env.episode_length_s = e.time_limit_s;
+    env.domain_rand.enabled = false;
+    env.init.yaw = [0.0, 0.0];
+    let c = &mut env.commands;
+    c.lin_vel_x = e.lin_vel_x;
+    c.lin_vel_y = [0.0, 0.0];
+    c.heading_command = true;
+    c.heading = [0.0, 0.0];
+    c.resample_time_s = e.time_limit_s * 2.0;
+    c.min_norm = 0.0;
+    if o.full_collision {
+        let d = crate::config::SimConfig::default();
+        env.sim.collision = CollisionMode::Full;
+        env.sim.iterations = d.iterations;
+        env.sim.ls_iterations = d.ls_iterations;
+        env.sim.integrator = Integrator::Implicit;
+        env.termination = Default::default();
+    }
+    env.terrain.mode = TerrainMode::Plane;
+    env.terrain.curriculum = false;
+    env
+}
+
+/// Evaluate the checkpoint's policy on `o.episodes` lanes.
+pub fn evaluate(ck: &Checkpoint, o: &EvalOptions) -> Result<EvalReport, RlError> {
+    if o.terrain != TerrainKind::Flat {
+        return Err(RlError::Invalid(format!(
+            "lanes of {:?} are not evaluated yet: this build evaluates flat lanes (the terrain specialists' issue adds the others)",
+            o.terrain
+        )));
+    }
+    if o.episodes == 0 {
+        return Err(RlError::Invalid("--episodes must be at least 1".into()));
+    }
+    let cfg = ck.config()?;
+    let env_cfg = eval_env_config(&cfg, o);
+    let mut env = VecEnv::new(&env_cfg)?;
+    let n = env.n_envs();
+    let mut agent = Agent::new(&cfg.policy, env.dims(), n, cfg.ppo.normalize_obs);
+    ck.load_agent(&mut agent)?;
+    agent.set_frozen(true);
+    agent.reset_history(&env);
+    let length = cfg.eval.lane_length;
+
+    // env i runs a counted episode while counted[i]; new episodes are counted
+    // until `o.episodes` have started
+    let mut started = n.min(o.episodes);
+    let mut counted: Vec<bool> = (0..n).map(|i| i < started).collect();
+    let (mut steps, mut speed) = (vec![0u64; n], vec![0.0f64; n]);
+    let mut t = Tally::default();
+    while t.done < o.episodes {
+        agent.prepare(&env);
+        let actions = agent.act_mean();
+        env.step(&actions);
+        for i in 0..n {
+            let out = env.outcomes[i];
+            let e = &env.envs()[i];
+            let end = if out.episode_done {
+                // the env has reset: the episode's end is what it remembered
+                let last = e.last_episode_end();
+                let dist = last.base_pos[0] - last.spawn[0];
+                Some((
+                    if out.terminated {
+                        Ending::Fall
+                    } else {
+                        Ending::Timeout
+                    },
+                    dist,
+                    last.command[0],
+                ))
+            } else {
+                let s = e.state();
+                if counted[i] {
+                    steps[i] += 1;
+                    t.err_sum +=
+                        (s.command[0] - s.base_lin_vel[0]).hypot(s.command[1] - s.base_lin_vel[1]);
+                    t.err_n += 1;
+                    speed[i] += s.base_lin_vel_world[0];
+                }
+                let dist = s.base_pos[0] - e.spawn()[0];
+                (dist >= length).then_some((Ending::Success, length, s.command[0]))
+            };
+            let Some((end, dist, cmd)) = end else {
+                continue;
+            };
+            if counted[i] {
+                t.add(
+                    end,
+                    (dist / length).clamp(0.0, 1.0),
+                    speed[i] / steps[i].max(1) as f64,
+                    cmd,
+                );
+            }
+            counted[i] = started < o.episodes;
+            started += counted[i] as usize;
+            steps[i] = 0;
+            speed[i] = 0.0;
+            if end == Ending::Success {
+                env.reset_env(i);
+                agent.reset_history_env(i, env.obs());
+            }
+        }
+    }
+    let d = t.done as f64;
+    Ok(EvalReport {
+        terrain: o.terrain.name().to_string(),
+        episodes: t.done,
+        success_rate: t.successes as f64 / d,
+        completion_rate: t.completion / d,
+        vel_tracking_error: if t.err_n > 0 {
+            t.err_sum / t.err_n as f64
+        } else {
+            f64::NAN
+        },
+        falls: t.falls,
+        timeouts: t.timeouts,
+        mean_forward_speed: t.fwd_sum / d,
+        mean_commanded_speed: t.cmd_sum / d,
+        lane_length: length,
+        full_collision: o.full_collision,
+        checkpoint: ck.path.display().to_string(),
+        checkpoint_iteration: ck.meta.iteration,
+        checkpoint_env_steps: ck.meta.env_steps,
+        mujoco_version: crate::sim::mujoco_version(),
+        seed: o.seed,
+    })
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Ending {
+    Success,
+    Fall,
+    Timeout,
+}
+
+/// Running sums of an evaluation.
+#[derive(Default)]
+struct Tally {
+    done: usize,
+    successes: usize,
+    falls: usize,
+    timeouts: usize,
+    completion: f64,
+    err_sum: f64,
+    err_n: u64,
+    fwd_sum: f64,
+    cmd_sum: f64,
+}
+
+impl Tally {
+    fn add(&mut self, end: Ending, completion: f64, speed: f64, cmd: f64) {
+        self.done += 1;
+        match end {
+            Ending::Success => self.successes += 1,
+            Ending::Fall => self.falls += 1,
+            Ending::Timeout => self.timeouts += 1,
+        }
+        self.completion += completion;
+        self.fwd_sum += speed;
+        self.cmd_sum += cmd;
+    }
+}

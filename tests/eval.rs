@@ -1,0 +1,175 @@
+//! Lane evaluation and TorchScript export on a checkpoint trained for two
+//! iterations of the tiny G1 config, and the CLI's messages around them.
+mod common;
+
+use std::process::Command;
+
+use common::{load_config, Scratch};
+use dreampolicy::env::VecEnv;
+use dreampolicy::eval::{evaluate, EvalOptions};
+use dreampolicy::rl::checkpoint::Checkpoint;
+use dreampolicy::rl::{runner, Agent, VecTask};
+use dreampolicy::terrain::TerrainKind;
+
+fn tiny_checkpoint(dir: &Scratch, sets: &[&str]) -> Checkpoint {
+    let mut all = vec!["train.iterations=2"];
+    all.extend_from_slice(sets);
+    let cfg = load_config("test/g1_tiny.yaml", &all);
+    let run = dir.0.join("run");
+    let s = runner::train(&cfg, &run, false, true).unwrap();
+    Checkpoint::read(&s.checkpoint).unwrap()
+}
+
+fn opts(episodes: usize) -> EvalOptions {
+    EvalOptions {
+        terrain: TerrainKind::Flat,
+        episodes,
+        full_collision: true,
+        seed: 3,
+        threads: 1,
+    }
+}
+
+#[test]
+fn eval_counts_successes_time_outs_and_completion() {
+    let dir = Scratch::new("eval");
+    // a 1 mm lane: every episode reaches the end line on its first step
+    let ck = tiny_checkpoint(&dir, &["eval.lane_length=0.001", "eval.n_envs=3"]);
+    let r = evaluate(&ck, &opts(7)).unwrap();
+    assert_eq!(r.episodes, 7);
+    assert_eq!(r.success_rate, 1.0);
+    assert_eq!(r.completion_rate, 1.0);
+    assert!(r.full_collision);
+
+    // a 50 m lane in 0.5 s: nobody arrives; an untrained policy stands or falls
+    let dir2 = Scratch::new("eval2");
+    let ck = tiny_checkpoint(
+        &dir2,
+        &[
+            "eval.lane_length=50",
+            "eval.time_limit_s=0.5",
+            "eval.n_envs=4",
+        ],
+    );
+    let r = evaluate(&ck, &opts(6)).unwrap();
+    assert_eq!(r.episodes, 6);
+    assert_eq!(r.success_rate, 0.0);
+    assert_eq!(r.falls + r.timeouts, 6);
+    assert!(
+        (0.0..0.05).contains(&r.completion_rate),
+        "{}",
+        r.completion_rate
+    );
+    assert!(r.vel_tracking_error.is_finite() && r.vel_tracking_error > 0.0);
+    assert!(
+        (0.5..=1.0).contains(&r.mean_commanded_speed),
+        "{}",
+        r.mean_commanded_speed
+    );
+    let json = serde_json::to_value(&r).unwrap();
+    for key in [
+        "success_rate",
+        "completion_rate",
+        "episodes",
+        "vel_tracking_error",
+    ] {
+        assert!(json.get(key).is_some(), "{key}");
+    }
+}
+
+#[test]
+fn exported_torchscript_gives_the_checkpoints_actions() {
+    export_matches(&[]);
+}
+
+#[test]
+fn exported_gru_policy_gives_the_checkpoints_actions() {
+    export_matches(&["policy.history.kind=gru", "policy.history.gru_hidden=16"]);
+}
+
+fn export_matches(sets: &[&str]) {
+    let dir = Scratch::new("export");
+    let ck = tiny_checkpoint(&dir, sets);
+    let out = dir.0.join("policy.pt");
+    let info = dreampolicy::rl::export::export(&ck, &out).unwrap();
+    assert_eq!(info.history_len, 3);
+    let module = tch::CModule::load(&out).unwrap();
+
+    let cfg = ck.config().unwrap();
+    let mut env = VecEnv::new(&cfg.env).unwrap();
+    let n = env.n_envs();
+    let mut agent = Agent::new(&cfg.policy, env.dims(), n, cfg.ppo.normalize_obs);
+    ck.load_agent(&mut agent).unwrap();
+    agent.set_frozen(true);
+    agent.reset_history(&env);
+    let d = env.dims();
+    for step in 0..6 {
+        agent.prepare(&env);
+        let ours = agent.act_mean();
+        let obs = tch::Tensor::from_slice(env.obs()).view([n as i64, d.obs as i64]);
+        let hist = tch::Tensor::from_slice(agent.history()).view([n as i64, 3, d.obs as i64]);
+        let scan = tch::Tensor::from_slice(VecTask::scan(&env)).view([n as i64, d.scan as i64]);
+        let theirs = module.forward_ts(&[obs, hist, scan]).unwrap();
+        let theirs = Vec::<f32>::try_from(theirs.contiguous().view([-1])).unwrap();
+        assert_eq!(theirs.len(), ours.len());
+        let max = ours
+            .iter()
+            .zip(&theirs)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max);
+        assert!(max < 1e-5, "step {step}: max difference {max}");
+        env.step(&ours);
+        agent.after_step(&env);
+    }
+}
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_dreampolicy"))
+}
+
+fn stderr_of(args: &[&str]) -> String {
+    let out = bin().args(args).output().unwrap();
+    assert!(!out.status.success(), "expected a failure for {args:?}");
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+#[test]
+fn cli_errors_name_the_problem() {
+    let dir = Scratch::new("cli-eval");
+    let missing = dir.0.join("nothing.pt");
+    let e = stderr_of(&["eval", "--checkpoint", missing.to_str().unwrap()]);
+    assert!(
+        e.contains("nothing.pt") && e.contains("no such file"),
+        "{e}"
+    );
+    let e = stderr_of(&["train", "specialist", "--resume", dir.0.to_str().unwrap()]);
+    assert!(e.contains("config.yaml"), "{e}");
+    let e = stderr_of(&[
+        "eval",
+        "--checkpoint",
+        missing.to_str().unwrap(),
+        "--terrain",
+        "lava",
+    ]);
+    assert!(e.contains("lava"), "{e}");
+    // a second training run into the same directory is refused
+    let cfg = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/test/cartpole.yaml");
+    let run = dir.0.join("run");
+    let args = [
+        "train",
+        "specialist",
+        "--quiet",
+        "--set",
+        "train.iterations=1",
+        "--config",
+        cfg.to_str().unwrap(),
+        "--out",
+        run.to_str().unwrap(),
+    ];
+    assert!(bin().args(args).output().unwrap().status.success());
+    let e = stderr_of(&args);
+    assert!(
+        e.contains("already holds a run") && e.contains("--resume"),
+        "{e}"
+    );
+}
