@@ -1,0 +1,30 @@
+//! Every experiment config we ship loads and validates (unknown keys stay errors).
+use std::path::Path;
+
+fn yaml_files(dir: &Path, out: &mut Vec<std::path::PathBuf>) {
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            yaml_files(&p, out);
+        } else if p.extension().is_some_and(|x| x == "yaml") {
+            out.push(p);
+        }
+    }
+}
+
+#[test]
+fn every_shipped_config_loads() {
+    let mut files = Vec::new();
+    yaml_files(&Path::new(env!("CARGO_MANIFEST_DIR")).join("configs"), &mut files);
+    assert!(files.len() >= 10, "{files:?}");
+    for f in &files {
+        dreampolicy::config::load(f, &[]).unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+    }
+    // and a typo in a training section is refused with the key named
+    let flat = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/specialist/flat.yaml");
+    let e = dreampolicy::config::load(&flat, &["ppo.learning_rat=1e-3".into()])
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("learning_rat"), "{e}");
+}
