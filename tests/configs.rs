@@ -15,7 +15,10 @@ fn yaml_files(dir: &Path, out: &mut Vec<std::path::PathBuf>) {
 #[test]
 fn every_shipped_config_loads() {
     let mut files = Vec::new();
-    yaml_files(&Path::new(env!("CARGO_MANIFEST_DIR")).join("configs"), &mut files);
+    yaml_files(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("configs"),
+        &mut files,
+    );
     assert!(files.len() >= 10, "{files:?}");
     for f in &files {
         dreampolicy::config::load(f, &[]).unwrap_or_else(|e| panic!("{}: {e}", f.display()));

@@ -196,34 +196,27 @@ fn broken_checkpoints_are_clear_errors() {
 fn gae_matches_a_hand_computation() {
     // 1 env, 3 steps, gamma 0.5, lambda 0.5; the episode ends after step 1
     let mut st = RolloutStorage::new(3, 1, [1, 1, 0, 1]);
-    let (r, v, d) = ([1.0f32, 2.0, 3.0], [0.5f32, 1.0, 2.0], [0.0f32, 1.0, 0.0]);
+    let (r, v, d) = (
+        [1.0f32, 2.0, 3.0, 0.0],
+        [0.5f32, 1.0, 2.0, 0.0],
+        [0.0f32, 1.0, 0.0, 0.0],
+    );
+    let step = |k: usize| Transition {
+        actor_in: &[0.0],
+        critic_in: &[0.0],
+        scan: &[],
+        actions: &[0.0],
+        log_probs: &[0.0],
+        values: &v[k..k + 1],
+        mean: &[0.0],
+        rewards: &r[k..k + 1],
+        dones: &d[k..k + 1],
+    };
     for k in 0..3 {
-        st.add(&Transition {
-            actor_in: &[0.0],
-            critic_in: &[0.0],
-            scan: &[],
-            actions: &[0.0],
-            log_probs: &[0.0],
-            values: &v[k..k + 1],
-            mean: &[0.0],
-            rewards: &r[k..k + 1],
-            dones: &d[k..k + 1],
-        })
-        .unwrap();
+        st.add(&step(k)).unwrap();
     }
     assert!(
-        st.add(&Transition {
-            actor_in: &[0.0],
-            critic_in: &[0.0],
-            scan: &[],
-            actions: &[0.0],
-            log_probs: &[0.0],
-            values: &[0.0],
-            mean: &[0.0],
-            rewards: &[0.0],
-            dones: &[0.0],
-        })
-        .is_err(),
+        st.add(&step(3)).is_err(),
         "a full storage refuses more steps"
     );
     st.compute_returns(&[4.0], 0.5, 0.5);

@@ -154,26 +154,13 @@ impl VecTask for CartPole {
     fn snapshot(&self) -> Vec<EnvSnapshot> {
         self.poles
             .iter()
-            .map(|p| EnvSnapshot {
-                rng_seed: p.rng.get_seed(),
-                rng_stream: p.rng.get_stream(),
-                rng_word_pos: p.rng.get_word_pos(),
-                level: 0,
-            })
+            .map(|p| EnvSnapshot::new(&p.rng, 0))
             .collect()
     }
     fn restore(&mut self, snaps: &[EnvSnapshot]) -> Result<(), String> {
-        if snaps.len() != self.poles.len() {
-            return Err(format!(
-                "snapshot of {} envs for {}",
-                snaps.len(),
-                self.poles.len()
-            ));
-        }
+        EnvSnapshot::check_count(snaps, self.poles.len())?;
         for (p, s) in self.poles.iter_mut().zip(snaps) {
-            p.rng = ChaCha8Rng::from_seed(s.rng_seed);
-            p.rng.set_stream(s.rng_stream);
-            p.rng.set_word_pos(s.rng_word_pos);
+            p.rng = s.rng();
         }
         Ok(())
     }

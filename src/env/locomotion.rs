@@ -162,12 +162,7 @@ impl LocoEnv {
 
     /// RNG state and level (see `rl::task::EnvSnapshot`).
     pub fn snapshot(&self) -> crate::rl::task::EnvSnapshot {
-        crate::rl::task::EnvSnapshot {
-            rng_seed: self.rng.get_seed(),
-            rng_stream: self.rng.get_stream(),
-            rng_word_pos: self.rng.get_word_pos(),
-            level: self.level,
-        }
+        crate::rl::task::EnvSnapshot::new(&self.rng, self.level)
     }
 
     /// Restore a snapshot's RNG and level.
@@ -180,9 +175,7 @@ impl LocoEnv {
         if s.level >= levels {
             return Err(format!("level {} of a map with {levels} levels", s.level));
         }
-        self.rng = ChaCha8Rng::from_seed(s.rng_seed);
-        self.rng.set_stream(s.rng_stream);
-        self.rng.set_word_pos(s.rng_word_pos);
+        self.rng = s.rng();
         self.level = s.level;
         Ok(())
     }

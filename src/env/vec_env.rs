@@ -113,13 +113,7 @@ impl VecEnv {
 
     /// Restore what [`VecEnv::snapshot`] took (then [`VecEnv::reset_all`]).
     pub fn restore(&mut self, snaps: &[crate::rl::task::EnvSnapshot]) -> Result<(), String> {
-        if snaps.len() != self.envs.len() {
-            return Err(format!(
-                "snapshot of {} envs for a batch of {}",
-                snaps.len(),
-                self.envs.len()
-            ));
-        }
+        crate::rl::task::EnvSnapshot::check_count(snaps, self.envs.len())?;
         for (e, s) in self.envs.iter_mut().zip(snaps) {
             e.restore(&self.shared, s)?;
         }

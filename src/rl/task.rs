@@ -27,6 +27,39 @@ pub struct EnvSnapshot {
     pub level: usize,
 }
 
+impl EnvSnapshot {
+    /// The snapshot of an env's RNG and level.
+    pub fn new(rng: &rand_chacha::ChaCha8Rng, level: usize) -> EnvSnapshot {
+        EnvSnapshot {
+            rng_seed: rng.get_seed(),
+            rng_stream: rng.get_stream(),
+            rng_word_pos: rng.get_word_pos(),
+            level,
+        }
+    }
+
+    /// The RNG, exactly where it was.
+    pub fn rng(&self) -> rand_chacha::ChaCha8Rng {
+        use rand::SeedableRng;
+        let mut rng = rand_chacha::ChaCha8Rng::from_seed(self.rng_seed);
+        rng.set_stream(self.rng_stream);
+        rng.set_word_pos(self.rng_word_pos);
+        rng
+    }
+
+    /// Check that `snaps` holds one snapshot per env of a batch of `n`.
+    pub fn check_count(snaps: &[EnvSnapshot], n: usize) -> Result<(), String> {
+        if snaps.len() == n {
+            Ok(())
+        } else {
+            Err(format!(
+                "snapshot of {} envs for a batch of {n}",
+                snaps.len()
+            ))
+        }
+    }
+}
+
 /// A batch of environments over contiguous `[n, dim]` f32 buffers with auto-reset.
 pub trait VecTask {
     fn dims(&self) -> TaskDims;
