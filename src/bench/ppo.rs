@@ -35,6 +35,10 @@ pub struct PpoVariant {
     pub inference_samples_per_s: f64,
     /// Policy FLOP/s at the rollout batch over bare GEMMs of the same shapes.
     pub inference_gemm_fraction: f64,
+    /// The policy's GEMM FLOP/s at the rollout batch (actor, critic, history).
+    pub inference_gflops: f64,
+    /// `inference_gflops` over the 512^3 sgemm of the same run.
+    pub inference_vs_sgemm: f64,
     /// Update samples (epochs x batch) per second.
     pub update_samples_per_s: f64,
 }
@@ -103,6 +107,7 @@ fn variant(
     name: &str,
     warmup: usize,
     iterations: usize,
+    sgemm_gflops: f64,
 ) -> Result<PpoVariant, RlError> {
     let mut env = VecEnv::new(&cfg.env)?;
     let mut tr = Trainer::new(cfg, &mut env, None)?;
@@ -164,6 +169,11 @@ fn variant(
     ));
     shapes.extend(layers(d.critic as i64, &p.critic_hidden, 1));
     let gemm = gemm_time(n as i64, &shapes);
+    let flops: f64 = shapes
+        .iter()
+        .map(|&(i, o)| 2.0 * (n as i64 * i * o) as f64)
+        .sum();
+    let inference_gflops = flops / infer / 1e9;
     let samples_update = (cfg.ppo.num_epochs * cfg.ppo.num_steps * n) as f64 * iterations as f64;
     Ok(PpoVariant {
         name: name.to_string(),
@@ -178,6 +188,8 @@ fn variant(
         share_update: upd / total,
         inference_samples_per_s: n as f64 / infer,
         inference_gemm_fraction: gemm / infer,
+        inference_gflops,
+        inference_vs_sgemm: inference_gflops / sgemm_gflops,
         update_samples_per_s: samples_update / upd,
     })
 }
@@ -199,7 +211,7 @@ pub fn ppo(
         })
     });
     let sgemm_gflops = 2.0 * 512f64.powi(3) / g / 1e9;
-    let mut variants = vec![variant(cfg, "config", warmup, iterations)?];
+    let mut variants = vec![variant(cfg, "config", warmup, iterations, sgemm_gflops)?];
     let paper = [
         ("paper_mlp_history", HistoryKind::Mlp),
         ("paper_gru_history", HistoryKind::Gru),
@@ -211,7 +223,7 @@ pub fn ppo(
         c.policy.history.kind = kind;
         c.policy.history.mlp_dims = vec![256, 64];
         c.policy.history.gru_hidden = 512;
-        variants.push(variant(&c, name, warmup, iterations)?);
+        variants.push(variant(&c, name, warmup, iterations, sgemm_gflops)?);
     }
     let v = variants[0].clone();
     Ok(PpoBench {

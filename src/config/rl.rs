@@ -115,7 +115,9 @@ pub struct PpoConfig {
     /// Clip the value update around the rollout's values (rsl_rl's use_clipped_value_loss).
     pub clip_value: bool,
     pub normalize_advantage: bool,
-    /// `fixed` or `adaptive` (rsl_rl: lr / 1.5 when KL > 2 desired, x 1.5 when < desired / 2).
+    /// `fixed`, `adaptive` (rsl_rl: lr / 1.5 when KL > 2 desired, x 1.5 when <
+    /// desired / 2, after every minibatch) or `adaptive_iteration` (the same once
+    /// per iteration).
     pub schedule: LrSchedule,
     pub desired_kl: f64,
     /// Normalize actor and critic inputs with running statistics.
@@ -148,7 +150,12 @@ impl Default for PpoConfig {
 #[serde(rename_all = "lowercase")]
 pub enum LrSchedule {
     Fixed,
+    /// rsl_rl's rule, after every minibatch.
     Adaptive,
+    /// The same rule once per iteration, on the update's mean KL: steadier on
+    /// small batches, where per-minibatch KL estimates are noisy.
+    #[serde(rename = "adaptive_iteration")]
+    AdaptiveIteration,
 }
 
 /// The training run.

@@ -47,9 +47,23 @@ impl Ppo {
         }
     }
 
+    /// rsl_rl's adaptive-KL rule: lr / 1.5 when `kl` > 2x desired, x 1.5 when
+    /// below half of it, within [1e-5, 1e-2].
+    fn adapt_lr(&mut self, kl: f64) {
+        let d = self.cfg.desired_kl;
+        if !kl.is_finite() {
+            return;
+        }
+        if kl > d * 2.0 {
+            self.opt.lr = (self.opt.lr / 1.5).max(1e-5);
+        } else if kl < d / 2.0 && kl > 0.0 {
+            self.opt.lr = (self.opt.lr * 1.5).min(1e-2);
+        }
+    }
+
     /// Update on a full storage; `seed` orders the minibatches.
     pub fn update(&mut self, policy: &ActorCritic, st: &RolloutStorage, seed: u64) -> Losses {
-        let c = &self.cfg;
+        let c = &self.cfg.clone();
         let b = (st.filled * st.n) as i64;
         let actor_in = tensor(&st.actor_in, b);
         let critic_in = tensor(&st.critic_in, b);
@@ -104,12 +118,8 @@ impl Ppo {
                         .mean(Kind::Float)
                         .double_value(&[])
                 });
-                if c.schedule == LrSchedule::Adaptive && kl.is_finite() {
-                    if kl > c.desired_kl * 2.0 {
-                        self.opt.lr = (self.opt.lr / 1.5).max(1e-5);
-                    } else if kl < c.desired_kl / 2.0 && kl > 0.0 {
-                        self.opt.lr = (self.opt.lr * 1.5).min(1e-2);
-                    }
+                if c.schedule == LrSchedule::Adaptive {
+                    self.adapt_lr(kl);
                 }
 
                 let ratio = (&logp - pick(&old_logp)).exp();
@@ -159,6 +169,9 @@ impl Ppo {
             &mut l.grad_norm,
         ] {
             *v /= count;
+        }
+        if c.schedule == LrSchedule::AdaptiveIteration {
+            self.adapt_lr(l.kl);
         }
         l.learning_rate = self.opt.lr;
         l.mean_std = tch::no_grad(|| policy.std().mean(Kind::Float).double_value(&[]));

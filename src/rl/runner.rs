@@ -155,6 +155,10 @@ impl<'a, T: VecTask> Trainer<'a, T> {
             }
             ck.load_agent(&mut agent)?;
             ck.load_optimizer(&mut ppo.opt)?;
+            if cfg.ppo.schedule == crate::config::LrSchedule::Fixed {
+                // a fixed rate is the config's (a resume may change it)
+                ppo.opt.lr = cfg.ppo.learning_rate;
+            }
             task.restore(&m.snapshots)
                 .map_err(|e| RlError::Invalid(format!("{}: {e}", ck.path.display())))?;
             task.set_penalty_scale(m.penalty_scale);
