@@ -122,6 +122,10 @@ pub struct PpoConfig {
     pub desired_kl: f64,
     /// Normalize actor and critic inputs with running statistics.
     pub normalize_obs: bool,
+    /// Left/right symmetry augmentation: every update batch also holds its
+    /// mirror image (observations, actions, old means), with the same advantages
+    /// and returns (rsl_rl's data augmentation; G1 tasks only).
+    pub symmetry: bool,
 }
 
 impl Default for PpoConfig {
@@ -142,6 +146,7 @@ impl Default for PpoConfig {
             schedule: LrSchedule::Fixed,
             desired_kl: 0.01,
             normalize_obs: true,
+            symmetry: false,
         }
     }
 }

@@ -3,6 +3,7 @@
 //! terms ([`rewards`]), terminations, terrain curriculum, domain randomization.
 pub mod cartpole;
 pub mod locomotion;
+pub mod mirror;
 pub mod obs;
 pub mod rewards;
 pub mod rollout;

@@ -33,6 +33,19 @@ pub struct Losses {
 pub struct Ppo {
     pub cfg: PpoConfig,
     pub opt: Adam,
+    /// Mirror maps as index and sign tensors (symmetry augmentation), for the
+    /// actor input, critic input, scandots and actions.
+    mirror: Option<[(Tensor, Tensor); 4]>,
+}
+
+fn signed_perm(sp: &crate::env::mirror::SignedPerm) -> (Tensor, Tensor) {
+    let idx: Vec<i64> = sp.perm.iter().map(|&p| p as i64).collect();
+    (Tensor::from_slice(&idx), Tensor::from_slice(&sp.sign))
+}
+
+/// `[x; mirror(x)]` along the batch dimension.
+fn with_mirror(x: &Tensor, m: &(Tensor, Tensor)) -> Tensor {
+    Tensor::cat(&[x.shallow_clone(), x.index_select(1, &m.0) * &m.1], 0)
 }
 
 fn tensor(v: &[f32], rows: i64) -> Tensor {
@@ -40,10 +53,25 @@ fn tensor(v: &[f32], rows: i64) -> Tensor {
 }
 
 impl Ppo {
-    pub fn new(cfg: &PpoConfig, policy: &ActorCritic) -> Ppo {
+    /// `mirror`: the task's mirror maps, used when `cfg.symmetry`.
+    pub fn new(
+        cfg: &PpoConfig,
+        policy: &ActorCritic,
+        mirror: Option<&crate::env::mirror::Mirror>,
+    ) -> Ppo {
+        let k = policy.history_len() + 1;
+        let mirror = mirror.filter(|_| cfg.symmetry).map(|m| {
+            [
+                signed_perm(&m.obs.tiled(k)),
+                signed_perm(&m.critic),
+                signed_perm(&m.scan),
+                signed_perm(&m.action),
+            ]
+        });
         Ppo {
             cfg: cfg.clone(),
             opt: Adam::new(policy.named_parameters(), cfg.learning_rate),
+            mirror,
         }
     }
 
@@ -65,14 +93,14 @@ impl Ppo {
     pub fn update(&mut self, policy: &ActorCritic, st: &RolloutStorage, seed: u64) -> Losses {
         let c = &self.cfg.clone();
         let b = (st.filled * st.n) as i64;
-        let actor_in = tensor(&st.actor_in, b);
-        let critic_in = tensor(&st.critic_in, b);
-        let scan = policy.uses_scan().then(|| tensor(&st.scan, b));
-        let actions = tensor(&st.actions, b);
-        let old_mean = tensor(&st.mean, b);
-        let old_logp = Tensor::from_slice(&st.log_probs);
-        let old_values = Tensor::from_slice(&st.values);
-        let returns = Tensor::from_slice(&st.returns);
+        let mut actor_in = tensor(&st.actor_in, b);
+        let mut critic_in = tensor(&st.critic_in, b);
+        let mut scan = policy.uses_scan().then(|| tensor(&st.scan, b));
+        let mut actions = tensor(&st.actions, b);
+        let mut old_mean = tensor(&st.mean, b);
+        let mut old_logp = Tensor::from_slice(&st.log_probs);
+        let mut old_values = Tensor::from_slice(&st.values);
+        let mut returns = Tensor::from_slice(&st.returns);
         let mut adv = Tensor::from_slice(&st.advantages);
         if c.normalize_advantage {
             adv = (&adv - adv.mean(Kind::Float)) / (adv.std(true) + 1e-8);
@@ -88,6 +116,22 @@ impl Ppo {
             }
         };
 
+        // symmetry augmentation: the batch and its mirror image, with the same
+        // advantages, returns, values and old log-probabilities
+        let mut b = b;
+        if let Some([ma, mc, ms, mact]) = &self.mirror {
+            actor_in = with_mirror(&actor_in, ma);
+            critic_in = with_mirror(&critic_in, mc);
+            scan = scan.map(|s| with_mirror(&s, ms));
+            actions = with_mirror(&actions, mact);
+            old_mean = with_mirror(&old_mean, mact);
+            let twice = |t: &Tensor| Tensor::cat(&[t.shallow_clone(), t.shallow_clone()], 0);
+            old_logp = twice(&old_logp);
+            old_values = twice(&old_values);
+            returns = twice(&returns);
+            adv = twice(&adv);
+            b *= 2;
+        }
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let mut order: Vec<i64> = (0..b).collect();
         let mb = (b as usize / c.num_minibatches).max(1);

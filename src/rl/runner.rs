@@ -140,7 +140,13 @@ impl<'a, T: VecTask> Trainer<'a, T> {
         if let Some(ck) = &init {
             ck.load_agent(&mut agent)?;
         }
-        let mut ppo = Ppo::new(&cfg.ppo, &agent.policy);
+        let mirror = task.mirror();
+        if cfg.ppo.symmetry && mirror.is_none() {
+            return Err(RlError::Invalid(
+                "ppo.symmetry needs a task with mirror maps (the G1 env)".into(),
+            ));
+        }
+        let mut ppo = Ppo::new(&cfg.ppo, &agent.policy, mirror.as_ref());
         let d = task.dims();
         let (mut iteration, mut env_steps, mut wall_offset) = (0, 0, 0.0);
         if let Some(ck) = resume {

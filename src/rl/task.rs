@@ -94,6 +94,10 @@ pub trait VecTask {
     fn set_penalty_scale(&mut self, _scale: f64) {}
     /// Control steps of the episode time limit.
     fn max_episode_steps(&self) -> u64;
+    /// Left/right mirror maps of the task's buffers (symmetry augmentation).
+    fn mirror(&self) -> Option<crate::env::mirror::Mirror> {
+        None
+    }
 }
 
 impl VecTask for VecEnv {
@@ -166,5 +170,8 @@ impl VecTask for VecEnv {
     }
     fn max_episode_steps(&self) -> u64 {
         self.shared().max_episode_steps
+    }
+    fn mirror(&self) -> Option<crate::env::mirror::Mirror> {
+        Some(crate::env::mirror::Mirror::g1())
     }
 }
