@@ -185,7 +185,7 @@ pub fn scene_xml(cfg: &EnvConfig, terrain: Option<&TerrainMap>) -> String {
     format!(
         r#"<mujoco model="g1_dreampolicy">
   <include file="g1_actuators.xml"/>
-  <option timestep="{dt}" integrator="{integrator}" iterations="{iterations}" ls_iterations="{ls_iterations}"/>
+  <option timestep="{dt}" integrator="{integrator}" iterations="{iterations}"{ls_iterations}/>
   <size nconmax="{nconmax}" njmax="{njmax}"/>
   {asset}
   <worldbody>
@@ -196,7 +196,12 @@ pub fn scene_xml(cfg: &EnvConfig, terrain: Option<&TerrainMap>) -> String {
         dt = cfg.sim.timestep,
         integrator = cfg.sim.integrator.mjcf(),
         iterations = cfg.sim.iterations,
-        ls_iterations = cfg.sim.ls_iterations,
+        // MuJoCo 2.2.2 has no ls_iterations (its line search is not capped separately)
+        ls_iterations = if cfg!(mujoco_v3) {
+            format!(r#" ls_iterations="{}""#, cfg.sim.ls_iterations)
+        } else {
+            String::new()
+        },
         nconmax = cfg.sim.nconmax,
         njmax = cfg.sim.njmax,
     )
