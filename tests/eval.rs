@@ -173,3 +173,26 @@ fn cli_errors_name_the_problem() {
         "{e}"
     );
 }
+
+#[test]
+fn the_agent_history_holds_the_last_states() {
+    let cfg = load_config("test/g1_tiny.yaml", &["env.n_envs=2"]);
+    let mut env = VecEnv::new(&cfg.env).unwrap();
+    let mut agent = Agent::new(&cfg.policy, env.dims(), 2, true);
+    agent.reset_history(&env);
+    let d = env.dims().obs;
+    let k = agent.policy.history_len();
+    let mut seen: Vec<Vec<f32>> = vec![env.obs.clone()];
+    for _ in 0..5 {
+        agent.step_mean(&mut env);
+        assert!(env.outcomes.iter().all(|o| !o.episode_done));
+        seen.push(env.obs.clone());
+    }
+    // after 5 steps the history is the states of steps 2, 3, 4 (oldest first)
+    for i in 0..2 {
+        for j in 0..k {
+            let h = &agent.history()[(i * k + j) * d..(i * k + j + 1) * d];
+            assert_eq!(h, &seen[5 - k + j][i * d..(i + 1) * d], "env {i}, slot {j}");
+        }
+    }
+}

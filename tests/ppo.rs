@@ -259,12 +259,18 @@ fn normalizer_tracks_mean_and_variance_across_batches() {
 fn symmetry_augmentation_trains_the_g1_and_is_refused_for_the_cartpole() {
     let _t = torch_lock();
     let dir = Scratch::new("sym");
-    let cfg = load_config("test/g1_tiny.yaml", &["ppo.symmetry=true", "train.iterations=2"]);
+    let cfg = load_config(
+        "test/g1_tiny.yaml",
+        &["ppo.symmetry=true", "train.iterations=2"],
+    );
     let s = runner::train(&cfg, &dir.0.join("g1"), false, true).unwrap();
     assert_eq!(s.iterations, 2);
     let kl = column(&dir.0.join("g1"), "kl");
     assert!(kl.iter().all(|k| k.is_finite()), "{kl:?}");
     let cp = load_config("test/cartpole.yaml", &["ppo.symmetry=true"]);
-    let e = runner::train(&cp, &dir.0.join("cp"), false, true).err().unwrap().to_string();
+    let e = runner::train(&cp, &dir.0.join("cp"), false, true)
+        .err()
+        .unwrap()
+        .to_string();
     assert!(e.contains("symmetry"), "{e}");
 }

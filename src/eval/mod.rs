@@ -109,9 +109,7 @@ pub fn evaluate(ck: &Checkpoint, o: &EvalOptions) -> Result<EvalReport, RlError>
     let (mut steps, mut speed) = (vec![0u64; n], vec![0.0f64; n]);
     let mut t = Tally::default();
     while t.done < o.episodes {
-        agent.prepare(&env);
-        let actions = agent.act_mean();
-        env.step(&actions);
+        agent.step_mean(&mut env);
         for i in 0..n {
             let out = env.outcomes[i];
             let e = &env.envs()[i];

@@ -249,6 +249,16 @@ impl Agent {
         })
     }
 
+    /// One deterministic control step of `task` (evaluation, rollouts): inputs,
+    /// mean actions, the env step, then the history update.
+    pub fn step_mean(&mut self, task: &mut dyn VecTask) -> crate::env::StepInfo {
+        self.prepare(&*task);
+        let actions = self.act_mean();
+        let info = task.step(&actions);
+        self.after_step(&*task);
+        info
+    }
+
     /// Values of raw critic rows and scandots of every env (e.g. the final
     /// observations of truncated episodes), normalized with the current statistics.
     pub fn values_of(&self, critic: &[f32], scan: &[f32]) -> Vec<f32> {
