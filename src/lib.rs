@@ -9,11 +9,13 @@
 //! * [`eval`] lane evaluation: success and completion rates, tracking error
 //! * [`rl`] PPO on libtorch: actor-critic, storage, normalizers, checkpoints, runner
 //! * [`config`] serde structs of the YAML experiment files
+//! * [`data`] the expert dataset: MCAP shards of frames, windows, split, shuffle, stats
 //! * [`run`] run directories (config.yaml, metrics.csv, log.txt) and progress bars
 //! * [`plot`] PNG training curves (a grid of line-chart panels) from a metrics CSV
 //! * [`bench`] the `dreampolicy bench ...` measurements
 pub mod bench;
 pub mod config;
+pub mod data;
 pub mod env;
 pub mod eval;
 pub mod plot;
