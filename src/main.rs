@@ -7,6 +7,8 @@ use clap::{Parser, Subcommand};
 
 use dreampolicy::{bench, config, robot, sim};
 
+mod data_cli;
+
 #[derive(Parser)]
 #[command(
     name = "dreampolicy",
@@ -105,6 +107,11 @@ enum Command {
         #[command(subcommand)]
         which: TerrainCommand,
     },
+    /// The expert dataset (MCAP shards): inspect, verify.
+    Data {
+        #[command(subcommand)]
+        which: data_cli::DataCommand,
+    },
 }
 
 #[derive(Subcommand)]
@@ -171,6 +178,8 @@ enum TerrainCommand {
 
 #[derive(Subcommand)]
 enum BenchCommand {
+    /// Window reads of the expert dataset vs a raw sequential read of the same shards.
+    Data(data_cli::BenchDataArgs),
     /// Time shares of PPO iterations (physics, inference, update) and inference
     /// against bare GEMMs, for the config's network and the paper's sizes.
     Ppo {
@@ -351,7 +360,9 @@ fn run(cli: Cli) -> Result<()> {
         Command::Train { which } => match which {
             TrainCommand::Specialist(args) => train_specialist(args),
         },
+        Command::Data { which } => data_cli::run(which),
         Command::Bench { which } => match which {
+            BenchCommand::Data(args) => data_cli::bench_data(args),
             BenchCommand::Ppo {
                 json,
                 config,

@@ -197,4 +197,5 @@ pub fn env(
         contacts_per_env: contacts,
     })
 }
+pub mod data;
 pub mod ppo;
