@@ -36,8 +36,11 @@ pub struct BenchDataArgs {
     #[arg(long)]
     json: bool,
     /// Dataset directory to read (default: synthetic shards written to a temporary directory).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "out")]
     dir: Option<PathBuf>,
+    /// Write the synthetic shards into this directory and keep them.
+    #[arg(long)]
+    out: Option<PathBuf>,
     /// Frames of the synthetic dataset.
     #[arg(long, default_value_t = 200_000)]
     frames: u32,
@@ -48,7 +51,7 @@ pub struct BenchDataArgs {
     #[arg(long, default_value_t = 8)]
     horizon: usize,
     /// Shuffle buffer capacity (windows).
-    #[arg(long, default_value_t = 4096)]
+    #[arg(long, default_value_t = 1024)]
     shuffle: usize,
     /// Alternating rounds (raw, file, windows); the best of each counts.
     #[arg(long, default_value_t = 3)]
@@ -119,8 +122,15 @@ pub fn run(cmd: DataCommand) -> Result<()> {
 
 pub fn bench_data(a: BenchDataArgs) -> Result<()> {
     let spec = WindowSpec::new(a.history, a.horizon)?;
-    let r = bench::data::data(a.dir.as_deref(), a.frames, spec, a.shuffle, a.rounds)
-        .context("bench data")?;
+    let r = bench::data::data(
+        a.dir.as_deref(),
+        a.out.as_deref(),
+        a.frames,
+        spec,
+        a.shuffle,
+        a.rounds,
+    )
+    .context("bench data")?;
     if a.json {
         println!("{}", serde_json::to_string(&r)?);
     } else {

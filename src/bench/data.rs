@@ -149,27 +149,32 @@ fn file_read(shards: &[PathBuf]) -> Result<u64, DataError> {
     Ok(total)
 }
 
-/// Measure on `dir` (or on synthetic shards written to a temporary directory of
-/// `frames` frames when `dir` is `None`), best of `rounds` alternating rounds.
+/// Measure on `dir` (or on synthetic shards of `frames` frames written to `out`,
+/// kept, or to a temporary directory, removed, when `dir` is `None`), best of
+/// `rounds` alternating rounds.
 pub fn data(
     dir: Option<&Path>,
+    out: Option<&Path>,
     frames: u32,
     spec: WindowSpec,
     shuffle_capacity: usize,
     rounds: usize,
 ) -> Result<DataBench, DataError> {
     let tmp = std::env::temp_dir().join(format!("dreampolicy-bench-data-{}", std::process::id()));
-    let (path, synthetic) = match dir {
-        Some(d) => (d.to_path_buf(), false),
-        None => {
+    let (path, synthetic) = match (dir, out) {
+        (Some(d), _) => (d.to_path_buf(), false),
+        (None, Some(o)) => (o.to_path_buf(), true),
+        (None, None) => {
             let _ = std::fs::remove_dir_all(&tmp);
-            let n_envs = 64;
-            write_synthetic(&tmp, 2, n_envs, (frames / (2 * n_envs)).max(1))?;
             (tmp.clone(), true)
         }
     };
-    let result = measure(&path, synthetic, spec, shuffle_capacity, rounds);
     if synthetic {
+        let n_envs = 64;
+        write_synthetic(&path, 2, n_envs, (frames / (2 * n_envs)).max(1))?;
+    }
+    let result = measure(&path, synthetic, spec, shuffle_capacity, rounds);
+    if synthetic && out.is_none() {
         let _ = std::fs::remove_dir_all(&tmp);
     }
     result

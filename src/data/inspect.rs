@@ -131,6 +131,9 @@ impl Inspection {
         }
         let _ = writeln!(s, "\nepisode length (frames, ended episodes)");
         let hist = histogram(&self.episode_lengths, 10);
+        if hist.is_empty() {
+            let _ = writeln!(s, "(no episode ended inside its shard)");
+        }
         let top = hist.iter().map(|h| h.2).max().unwrap_or(0).max(1);
         for (lo, hi, c) in &hist {
             let bar = "#".repeat(((*c as f64 / top as f64) * 40.0).round() as usize);
