@@ -278,8 +278,10 @@ impl<'a, T: VecTask> Trainer<'a, T> {
             self.times.physics += (t2 - t1).as_secs_f64();
         }
         let t0 = Instant::now();
-        self.agent.prepare(&*self.task);
-        let last = self.agent.act(false).values;
+        // values of the states after the last step; `prepare` is not called here:
+        // it would count these states into the normalizers a second time (the
+        // next iteration's first `prepare` counts them)
+        let last = self.agent.values_of(self.task.critic(), self.task.scan());
         self.storage
             .compute_returns(&last, c.gamma as f32, c.lam as f32);
         let t1 = Instant::now();
