@@ -66,14 +66,22 @@ enum Command {
         #[command(subcommand)]
         which: TrainCommand,
     },
-    /// Evaluate a checkpoint on 10 m lanes: success and completion rates,
-    /// velocity-tracking error, falls.
+    /// Evaluate checkpoints on 10 m lanes: success and completion rates,
+    /// velocity-tracking error, falls. Several checkpoints and terrains give the
+    /// cross-terrain matrix (a table, JSON and a heatmap PNG).
     Eval {
-        #[arg(long)]
-        checkpoint: PathBuf,
-        /// Terrain of the lanes.
-        #[arg(long, default_value = "flat")]
-        terrain: String,
+        /// Checkpoint to evaluate; repeat (or give a comma-separated list) for a matrix.
+        #[arg(long, required = true, value_delimiter = ',')]
+        checkpoint: Vec<PathBuf>,
+        /// Terrain(s) of the lanes, comma-separated (flat, uneven, stair, gap, bridge, ...).
+        #[arg(
+            long,
+            visible_alias = "terrains",
+            default_value = "flat",
+            value_delimiter = ','
+        )]
+        terrain: Vec<String>,
+        /// Episodes per checkpoint and terrain.
         #[arg(long, default_value_t = 100)]
         episodes: usize,
         /// Evaluate on the project's default scene (full collisions, MuJoCo's
@@ -84,9 +92,12 @@ enum Command {
         seed: u64,
         #[arg(long, default_value_t = 2)]
         threads: usize,
-        /// Also write the JSON report to this file.
+        /// Also write the JSON report (one evaluation) or matrix to this file.
         #[arg(long)]
         out: Option<PathBuf>,
+        /// Draw the success rates as a heatmap PNG (checkpoints x terrains).
+        #[arg(long)]
+        heatmap: Option<PathBuf>,
         #[arg(long)]
         json: bool,
     },
@@ -316,35 +327,19 @@ fn run(cli: Cli) -> Result<()> {
             seed,
             threads,
             out,
+            heatmap,
             json,
-        } => {
-            use dreampolicy::{eval, rl::checkpoint::Checkpoint, terrain::TerrainKind};
-            let terrain = TerrainKind::from_name(&terrain)?;
-            let ck = Checkpoint::read(&checkpoint)?;
-            let opts = eval::EvalOptions {
-                terrain,
-                episodes,
-                full_collision,
-                seed,
-                threads: threads.max(1),
-            };
-            let r = eval::evaluate(&ck, &opts).context("evaluation")?;
-            let text = serde_json::to_string_pretty(&r)?;
-            if let Some(path) = &out {
-                std::fs::write(path, format!("{text}\n"))
-                    .with_context(|| format!("writing {}", path.display()))?;
-            }
-            if json {
-                println!("{}", serde_json::to_string(&r)?);
-            } else {
-                println!(
-                    "{} lanes of {:.0} m ({}): success {:.3}, completion {:.3}, velocity error {:.3} m/s, {} falls, {} time-outs, mean speed {:.2} m/s (commanded {:.2})",
-                    r.episodes, r.lane_length, r.terrain, r.success_rate, r.completion_rate,
-                    r.vel_tracking_error, r.falls, r.timeouts, r.mean_forward_speed, r.mean_commanded_speed
-                );
-            }
-            Ok(())
-        }
+        } => eval_cmd(EvalArgs {
+            checkpoints: checkpoint,
+            terrains: terrain,
+            episodes,
+            full_collision,
+            seed,
+            threads,
+            out,
+            heatmap,
+            json,
+        }),
         Command::Plot { run } => {
             let out = dreampolicy::rl::runner::plot_run(&run)
                 .with_context(|| format!("plotting {}", run.display()))?;
@@ -567,5 +562,132 @@ fn terrain_render(
         out.display(),
         lane.length()
     );
+    Ok(())
+}
+
+struct EvalArgs {
+    checkpoints: Vec<PathBuf>,
+    terrains: Vec<String>,
+    episodes: usize,
+    full_collision: bool,
+    seed: u64,
+    threads: usize,
+    out: Option<PathBuf>,
+    heatmap: Option<PathBuf>,
+    json: bool,
+}
+
+/// A checkpoint's short name: the run directory of `<run>/checkpoints/<file>.pt`,
+/// else the file stem.
+fn checkpoint_name(path: &std::path::Path) -> String {
+    let parent = path.parent();
+    if parent
+        .and_then(|p| p.file_name())
+        .is_some_and(|n| n == "checkpoints")
+    {
+        if let Some(run) = parent.and_then(|p| p.parent()).and_then(|p| p.file_name()) {
+            return run.to_string_lossy().into_owned();
+        }
+    }
+    path.file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| path.display().to_string())
+}
+
+fn eval_cmd(a: EvalArgs) -> Result<()> {
+    use dreampolicy::{eval, rl::checkpoint::Checkpoint, terrain::TerrainKind};
+    let kinds = a
+        .terrains
+        .iter()
+        .map(|t| TerrainKind::from_name(t.trim()))
+        .collect::<Result<Vec<_>, _>>()?;
+    let cks = a
+        .checkpoints
+        .iter()
+        .map(|p| Checkpoint::read(p))
+        .collect::<Result<Vec<_>, _>>()?;
+    let names: Vec<String> = a.checkpoints.iter().map(|p| checkpoint_name(p)).collect();
+    let mut reports = Vec::with_capacity(cks.len());
+    for (ck, name) in cks.iter().zip(&names) {
+        let mut row = Vec::with_capacity(kinds.len());
+        for &kind in &kinds {
+            let opts = eval::EvalOptions {
+                terrain: kind,
+                episodes: a.episodes,
+                full_collision: a.full_collision,
+                seed: a.seed,
+                threads: a.threads.max(1),
+            };
+            let r = eval::evaluate(ck, &opts)
+                .with_context(|| format!("evaluating {name} on {}", kind.name()))?;
+            if !a.json {
+                println!(
+                    "{name}: {} lanes of {:.0} m ({}{}): success {:.3}, completion {:.3}, velocity error {:.3} m/s, {} falls, {} time-outs, mean speed {:.2} m/s (commanded {:.2})",
+                    r.episodes, r.lane_length, r.terrain,
+                    r.level.map(|l| format!(", level {l}")).unwrap_or_default(),
+                    r.success_rate, r.completion_rate,
+                    r.vel_tracking_error, r.falls, r.timeouts, r.mean_forward_speed, r.mean_commanded_speed
+                );
+            }
+            row.push(r);
+        }
+        reports.push(row);
+    }
+    let single = reports.len() == 1 && kinds.len() == 1;
+    let value = if single {
+        serde_json::to_value(&reports[0][0])?
+    } else {
+        serde_json::json!({
+            "checkpoints": names,
+            "terrains": kinds.iter().map(|k| k.name()).collect::<Vec<_>>(),
+            "success_rate": reports.iter().map(|r| r.iter().map(|e| e.success_rate).collect::<Vec<_>>()).collect::<Vec<_>>(),
+            "completion_rate": reports.iter().map(|r| r.iter().map(|e| e.completion_rate).collect::<Vec<_>>()).collect::<Vec<_>>(),
+            "reports": reports,
+        })
+    };
+    if let Some(path) = &a.out {
+        std::fs::write(path, format!("{}\n", serde_json::to_string_pretty(&value)?))
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    if let Some(path) = &a.heatmap {
+        let cols: Vec<String> = kinds.iter().map(|k| k.name().to_string()).collect();
+        let values: Vec<Vec<f64>> = reports
+            .iter()
+            .map(|r| r.iter().map(|e| e.success_rate).collect())
+            .collect();
+        dreampolicy::plot::heatmap(
+            path,
+            &format!(
+                "Success rate over {} lanes of 10 m (rows: policy, columns: terrain)",
+                a.episodes
+            ),
+            &names,
+            &cols,
+            &values,
+        )?;
+    }
+    if a.json {
+        println!("{}", serde_json::to_string(&value)?);
+    } else if !single {
+        let mut t = format!(
+            "| policy | {} |\n|---|",
+            kinds
+                .iter()
+                .map(|k| k.name())
+                .collect::<Vec<_>>()
+                .join(" | ")
+        );
+        t.push_str(&"---|".repeat(kinds.len()));
+        for (name, row) in names.iter().zip(&reports) {
+            t.push_str(&format!("\n| {name} |"));
+            for r in row {
+                t.push_str(&format!(
+                    " {:.2} ({:.2}) |",
+                    r.success_rate, r.completion_rate
+                ));
+            }
+        }
+        println!("\nsuccess rate (completion rate):\n{t}");
+    }
     Ok(())
 }

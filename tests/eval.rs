@@ -196,3 +196,106 @@ fn the_agent_history_holds_the_last_states() {
         }
     }
 }
+
+#[test]
+fn terrain_lanes_are_walked_and_episodes_spread_over_lanes() {
+    let dir = Scratch::new("eval-lanes");
+    // a 1 mm lane: every episode ends on its first step, on any terrain
+    let ck = tiny_checkpoint(
+        &dir,
+        &["eval.lane_length=0.001", "eval.n_envs=3", "eval.lanes=2"],
+    );
+    let o = EvalOptions {
+        terrain: TerrainKind::Stair,
+        ..opts(5)
+    };
+    let r = evaluate(&ck, &o).unwrap();
+    assert_eq!((r.episodes, r.success_rate), (5, 1.0));
+    assert_eq!(r.level, Some(5));
+    assert_eq!(r.terrain, "stair");
+
+    // 50 m in 0.5 s on uneven ground: every episode is counted once, none succeeds
+    let dir2 = Scratch::new("eval-lanes2");
+    let ck = tiny_checkpoint(
+        &dir2,
+        &[
+            "eval.lane_length=50",
+            "eval.time_limit_s=0.5",
+            "eval.n_envs=2",
+            "eval.lanes=3",
+        ],
+    );
+    let o = EvalOptions {
+        terrain: TerrainKind::Uneven,
+        ..opts(4)
+    };
+    let r = evaluate(&ck, &o).unwrap();
+    assert_eq!(r.episodes, 4);
+    assert_eq!(r.success_rate, 0.0);
+    assert_eq!(r.falls + r.timeouts, 4);
+    assert!(
+        (0.0..0.05).contains(&r.completion_rate),
+        "{}",
+        r.completion_rate
+    );
+
+    // a level the terrain config does not have is a clear error
+    let dir3 = Scratch::new("eval-lanes3");
+    let ck = tiny_checkpoint(&dir3, &["eval.level=12"]);
+    let e = evaluate(&ck, &o).err().unwrap().to_string();
+    assert!(
+        e.contains("eval.level 12") && e.contains("top level 9"),
+        "{e}"
+    );
+}
+
+#[test]
+fn eval_cli_prints_the_cross_terrain_matrix_and_heatmap() {
+    let dir = Scratch::new("eval-matrix");
+    let a = tiny_checkpoint(&dir, &["eval.lane_length=0.001", "eval.n_envs=2"]);
+    let dir2 = Scratch::new("eval-matrix2");
+    let b = tiny_checkpoint(
+        &dir2,
+        &[
+            "eval.lane_length=50",
+            "eval.time_limit_s=0.3",
+            "eval.n_envs=2",
+        ],
+    );
+    let png = dir.0.join("matrix.png");
+    let list = format!("{},{}", a.path.display(), b.path.display());
+    let out = bin()
+        .args([
+            "eval",
+            "--checkpoint",
+            &list,
+            "--terrains",
+            "flat,gap",
+            "--episodes",
+            "2",
+        ])
+        .args([
+            "--threads",
+            "1",
+            "--json",
+            "--heatmap",
+            png.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["terrains"], serde_json::json!(["flat", "gap"]));
+    assert_eq!(v["checkpoints"].as_array().unwrap().len(), 2);
+    assert_eq!(
+        v["success_rate"],
+        serde_json::json!([[1.0, 1.0], [0.0, 0.0]])
+    );
+    assert_eq!(v["reports"][1][1]["level"], 5);
+    let bytes = std::fs::read(&png).unwrap();
+    assert_eq!(&bytes[1..4], b"PNG");
+}

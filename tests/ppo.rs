@@ -274,3 +274,73 @@ fn symmetry_augmentation_trains_the_g1_and_is_refused_for_the_cartpole() {
         .to_string();
     assert!(e.contains("symmetry"), "{e}");
 }
+
+#[test]
+fn walker_transfers_into_a_scan_encoder_policy_acting_the_same() {
+    use dreampolicy::env::VecEnv;
+    use dreampolicy::rl::{Agent, VecTask};
+    let _t = torch_lock();
+    let dir = Scratch::new("transfer");
+    let walker_cfg = load_config("test/g1_tiny.yaml", &["train.iterations=2"]);
+    let walker = runner::train(&walker_cfg, &dir.0.join("walker"), false, true).unwrap();
+    let ck = Checkpoint::read(&walker.checkpoint).unwrap();
+    let init = format!("train.init_checkpoint={}", walker.checkpoint.display());
+    let sets = [
+        "train.iterations=1",
+        "policy.scan_encoder.enabled=true",
+        "policy.scan_encoder.dims=[16,8]",
+        "env.terrain.mode=map",
+        "env.terrain.map.num_levels=3",
+        "env.terrain.map.num_cols=2",
+        "env.terrain.map.kinds={uneven: 1.0}",
+        init.as_str(),
+    ];
+    let spec_cfg = load_config("test/g1_tiny.yaml", &sets);
+
+    // on the same (terrain) states, the transferred policy acts as the walker does
+    let mut env = VecEnv::new(&spec_cfg.env).unwrap();
+    let n = env.n_envs();
+    let mut old = Agent::new(&walker_cfg.policy, env.dims(), n, true);
+    ck.load_agent(&mut old).unwrap();
+    let mut new = Agent::new(&spec_cfg.policy, env.dims(), n, true);
+    let t = ck.transfer_agent(&mut new).unwrap();
+    assert_eq!(t.widened, ["actor.0.weight", "critic.0.weight"]);
+    assert_eq!(t.fresh.len(), 8, "{t}");
+    assert!(new.policy.uses_scan() && !old.policy.uses_scan());
+    for a in [&mut old, &mut new] {
+        a.set_frozen(true);
+        a.reset_history(&env);
+    }
+    for _ in 0..3 {
+        old.prepare(&env);
+        new.prepare(&env);
+        let (a, b) = (old.act_mean(), new.act_mean());
+        let max = a
+            .iter()
+            .zip(&b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f32::max);
+        assert!(max < 1e-6, "actions differ by {max}");
+        env.step(&a);
+        old.after_step(&env);
+        new.after_step(&env);
+    }
+
+    // a training run starts from it and says so
+    let run = dir.0.join("specialist");
+    runner::train(&spec_cfg, &run, false, true).unwrap();
+    let log = std::fs::read_to_string(run.join("log.txt")).unwrap();
+    assert!(
+        log.contains("widened for the scan latent: [actor.0.weight, critic.0.weight]"),
+        "{log}"
+    );
+
+    // other architecture changes are refused, naming the tensor
+    let wide = load_config("test/g1_tiny.yaml", &["policy.actor_hidden=[48,32]"]);
+    let mut agent = Agent::new(&wide.policy, env.dims(), n, true);
+    let e = ck.transfer_agent(&mut agent).err().unwrap().to_string();
+    assert!(
+        e.contains("'actor.0.") && e.contains("only the scan encoders"),
+        "{e}"
+    );
+}

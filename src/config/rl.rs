@@ -211,6 +211,9 @@ pub struct EvalConfig {
     pub level: usize,
     /// Envs run in parallel.
     pub n_envs: i64,
+    /// Different lanes (terrain seeds) the episodes of a non-flat evaluation
+    /// are spread over.
+    pub lanes: usize,
 }
 
 impl Default for EvalConfig {
@@ -221,6 +224,7 @@ impl Default for EvalConfig {
             time_limit_s: 30.0,
             level: 5,
             n_envs: 20,
+            lanes: 10,
         }
     }
 }

@@ -11,10 +11,12 @@
 use serde::Serialize;
 
 use crate::config::{CollisionMode, EnvConfig, ExperimentConfig, Integrator, TerrainMode};
-use crate::env::VecEnv;
+use std::sync::Arc;
+
+use crate::env::{Scene, VecEnv};
 use crate::rl::checkpoint::Checkpoint;
 use crate::rl::{Agent, RlError, VecTask};
-use crate::terrain::TerrainKind;
+use crate::terrain::{TerrainKind, TerrainMap};
 
 /// What an evaluation measured.
 #[derive(Debug, Clone, Serialize)]
@@ -31,6 +33,8 @@ pub struct EvalReport {
     pub mean_forward_speed: f64,
     pub mean_commanded_speed: f64,
     pub lane_length: f64,
+    /// Curriculum level of the lanes (None for flat lanes, which are the plane).
+    pub level: Option<usize>,
     pub full_collision: bool,
     pub checkpoint: String,
     pub checkpoint_iteration: usize,
@@ -76,40 +80,115 @@ pub fn eval_env_config(cfg: &ExperimentConfig, o: &EvalOptions) -> EnvConfig {
         env.sim.integrator = Integrator::Implicit;
         env.termination = Default::default();
     }
-    env.terrain.mode = TerrainMode::Plane;
+    env.terrain.mode = if o.terrain == TerrainKind::Flat {
+        TerrainMode::Plane
+    } else {
+        TerrainMode::Map
+    };
     env.terrain.curriculum = false;
+    env.terrain.flat_on_plane = false;
     env
 }
 
-/// Evaluate the checkpoint's policy on `o.episodes` lanes.
+/// Evaluate the checkpoint's policy on `o.episodes` lanes: flat lanes are the
+/// plane; any other kind is walked on [`crate::terrain::TerrainMap::lane`]s of the
+/// checkpoint's terrain config at `eval.level`, `eval.lanes` different lanes
+/// (seeds `o.seed`, `o.seed + 1`, ...) sharing the episodes evenly.
 pub fn evaluate(ck: &Checkpoint, o: &EvalOptions) -> Result<EvalReport, RlError> {
-    if o.terrain != TerrainKind::Flat {
-        return Err(RlError::Invalid(format!(
-            "lanes of {:?} are not evaluated yet: this build evaluates flat lanes (the terrain specialists' issue adds the others)",
-            o.terrain
-        )));
-    }
     if o.episodes == 0 {
         return Err(RlError::Invalid("--episodes must be at least 1".into()));
     }
     let cfg = ck.config()?;
     let env_cfg = eval_env_config(&cfg, o);
-    let mut env = VecEnv::new(&env_cfg)?;
+    let length = cfg.eval.lane_length;
+    let mut t = Tally::default();
+    if o.terrain == TerrainKind::Flat {
+        let mut env = VecEnv::new(&env_cfg)?;
+        run_episodes(ck, &cfg, &mut env, o.episodes, length, &mut t)?;
+    } else {
+        let map_cfg = &cfg.env.terrain.map;
+        if cfg.eval.level > map_cfg.max_level() {
+            return Err(RlError::Invalid(format!(
+                "eval.level {} is above the terrain config's top level {}",
+                cfg.eval.level,
+                map_cfg.max_level()
+            )));
+        }
+        let lanes = cfg.eval.lanes.clamp(1, o.episodes);
+        for k in 0..lanes {
+            let count = o.episodes / lanes + usize::from(k < o.episodes % lanes);
+            let lane = TerrainMap::lane(
+                map_cfg,
+                o.terrain,
+                cfg.eval.level,
+                // the terrain is drawn over at least 1 m; success is still
+                // measured at `eval.lane_length`
+                length.max(crate::terrain::lane::MIN_SEGMENT_LENGTH),
+                map_cfg.tile_width,
+                o.seed.wrapping_add(k as u64),
+            )
+            .map_err(|e| {
+                RlError::Invalid(format!("building the {} lane: {e}", o.terrain.name()))
+            })?;
+            let mut lane_cfg = env_cfg.clone();
+            lane_cfg.n_envs = env_cfg.n_envs.min(count as i64);
+            lane_cfg.seed = o.seed.wrapping_add(1000 * k as u64);
+            let scene = Scene::with_terrain(&lane_cfg, Some(Arc::new(lane.map().clone())))?;
+            let mut env = VecEnv::with_scene(&lane_cfg, scene)?;
+            run_episodes(ck, &cfg, &mut env, count, length, &mut t)?;
+        }
+    }
+    let d = t.done as f64;
+    Ok(EvalReport {
+        terrain: o.terrain.name().to_string(),
+        episodes: t.done,
+        success_rate: t.successes as f64 / d,
+        completion_rate: t.completion / d,
+        vel_tracking_error: if t.err_n > 0 {
+            t.err_sum / t.err_n as f64
+        } else {
+            f64::NAN
+        },
+        falls: t.falls,
+        timeouts: t.timeouts,
+        mean_forward_speed: t.fwd_sum / d,
+        mean_commanded_speed: t.cmd_sum / d,
+        lane_length: length,
+        level: (o.terrain != TerrainKind::Flat).then_some(cfg.eval.level),
+        full_collision: o.full_collision,
+        checkpoint: ck.path.display().to_string(),
+        checkpoint_iteration: ck.meta.iteration,
+        checkpoint_env_steps: ck.meta.env_steps,
+        mujoco_version: crate::sim::mujoco_version(),
+        seed: o.seed,
+    })
+}
+
+/// Run `episodes` counted episodes of the checkpoint's deterministic policy on
+/// `env`, adding them to `t`. An episode succeeds when the base is `length`
+/// metres past its spawn point along x.
+fn run_episodes(
+    ck: &Checkpoint,
+    cfg: &ExperimentConfig,
+    env: &mut VecEnv,
+    episodes: usize,
+    length: f64,
+    t: &mut Tally,
+) -> Result<(), RlError> {
     let n = env.n_envs();
     let mut agent = Agent::new(&cfg.policy, env.dims(), n, cfg.ppo.normalize_obs);
     ck.load_agent(&mut agent)?;
     agent.set_frozen(true);
-    agent.reset_history(&env);
-    let length = cfg.eval.lane_length;
+    agent.reset_history(&*env);
+    let target = t.done + episodes;
 
     // env i runs a counted episode while counted[i]; new episodes are counted
-    // until `o.episodes` have started
-    let mut started = n.min(o.episodes);
+    // until `episodes` have started
+    let mut started = n.min(episodes);
     let mut counted: Vec<bool> = (0..n).map(|i| i < started).collect();
     let (mut steps, mut speed) = (vec![0u64; n], vec![0.0f64; n]);
-    let mut t = Tally::default();
-    while t.done < o.episodes {
-        agent.step_mean(&mut env);
+    while t.done < target {
+        agent.step_mean(env);
         for i in 0..n {
             let out = env.outcomes[i];
             let e = &env.envs()[i];
@@ -149,7 +228,7 @@ pub fn evaluate(ck: &Checkpoint, o: &EvalOptions) -> Result<EvalReport, RlError>
                     cmd,
                 );
             }
-            counted[i] = started < o.episodes;
+            counted[i] = started < episodes;
             started += counted[i] as usize;
             steps[i] = 0;
             speed[i] = 0.0;
@@ -159,29 +238,7 @@ pub fn evaluate(ck: &Checkpoint, o: &EvalOptions) -> Result<EvalReport, RlError>
             }
         }
     }
-    let d = t.done as f64;
-    Ok(EvalReport {
-        terrain: o.terrain.name().to_string(),
-        episodes: t.done,
-        success_rate: t.successes as f64 / d,
-        completion_rate: t.completion / d,
-        vel_tracking_error: if t.err_n > 0 {
-            t.err_sum / t.err_n as f64
-        } else {
-            f64::NAN
-        },
-        falls: t.falls,
-        timeouts: t.timeouts,
-        mean_forward_speed: t.fwd_sum / d,
-        mean_commanded_speed: t.cmd_sum / d,
-        lane_length: length,
-        full_collision: o.full_collision,
-        checkpoint: ck.path.display().to_string(),
-        checkpoint_iteration: ck.meta.iteration,
-        checkpoint_env_steps: ck.meta.env_steps,
-        mujoco_version: crate::sim::mujoco_version(),
-        seed: o.seed,
-    })
+    Ok(())
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

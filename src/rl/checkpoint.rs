@@ -43,6 +43,28 @@ pub struct CheckpointMeta {
     pub penalty_scale: f64,
 }
 
+/// What [`Checkpoint::transfer_agent`] did, tensor by tensor.
+#[derive(Debug, Clone, Default)]
+pub struct Transfer {
+    pub copied: Vec<String>,
+    /// First layers that got zero columns for the scan latent.
+    pub widened: Vec<String>,
+    /// Scan-encoder tensors left at their fresh initialization.
+    pub fresh: Vec<String>,
+}
+
+impl std::fmt::Display for Transfer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} tensors copied, widened for the scan latent: [{}], fresh: [{}]",
+            self.copied.len(),
+            self.widened.join(", "),
+            self.fresh.join(", ")
+        )
+    }
+}
+
 /// A checkpoint read from disk.
 pub struct Checkpoint {
     pub path: PathBuf,
@@ -181,6 +203,96 @@ impl Checkpoint {
             slot.frozen = frozen;
         }
         Ok(())
+    }
+
+    /// Start `agent` from this checkpoint where the architectures differ by the
+    /// scan encoders only: the flat walker (no scandots) into a terrain
+    /// specialist. Tensors of the same shape are copied; the first layers of the
+    /// actor and the critic get zero columns where the scan latent enters (so the
+    /// new policy acts exactly as the old one until training moves them); the
+    /// scan encoders keep their fresh weights, and the scandot normalizer its
+    /// fresh statistics (a plane's scandots say nothing about terrain). Any
+    /// other difference is an error naming the tensor.
+    pub fn transfer_agent(&self, agent: &mut Agent) -> Result<Transfer, RlError> {
+        let src_cfg = self.config()?;
+        let src_scan = src_cfg.policy.scan_encoder.enabled && self.meta.dims.scan > 0;
+        let dims = agent.dims();
+        if self.meta.dims != dims {
+            return Err(err(
+                &self.path,
+                format!(
+                    "saved for task dims {:?}, this policy has {dims:?}",
+                    self.meta.dims
+                ),
+            ));
+        }
+        let scan_out = if agent.policy.uses_scan() {
+            *agent.policy.cfg.scan_encoder.dims.last().unwrap_or(&0)
+        } else {
+            0
+        };
+        let mut report = Transfer::default();
+        for (name, mut var) in agent.policy.named_parameters() {
+            let Some(src) = self.tensors.get(&format!("policy.{name}")) else {
+                if name.starts_with("scan_") && !src_scan {
+                    report.fresh.push(name);
+                    continue;
+                }
+                return Err(err(&self.path, format!("missing tensor '{name}'")));
+            };
+            let (ss, ns) = (src.size(), var.size());
+            if ss == ns {
+                tch::no_grad(|| var.copy_(src));
+                report.copied.push(name);
+                continue;
+            }
+            // the first layer of the actor ([hist, scan, obs]) or critic ([scan, critic])
+            let offset = match name.as_str() {
+                "actor.0.weight" => Some(ss.get(1).copied().unwrap_or(0) - dims.obs as i64),
+                "critic.0.weight" => Some(0),
+                _ => None,
+            };
+            let widen = offset.filter(|_| {
+                !src_scan
+                    && scan_out > 0
+                    && ss.len() == 2
+                    && ns.len() == 2
+                    && ss[0] == ns[0]
+                    && ns[1] == ss[1] + scan_out
+            });
+            let Some(off) = widen else {
+                return Err(err(
+                    &self.path,
+                    format!(
+                        "tensor '{name}' has shape {ss:?}, the configured policy needs {ns:?}: only the scan encoders may be added (hidden sizes and history must match)"
+                    ),
+                ));
+            };
+            tch::no_grad(|| {
+                let zeros = Tensor::zeros([ns[0], scan_out], (src.kind(), src.device()));
+                let rest = ss[1] - off;
+                let w = Tensor::cat(&[src.narrow(1, 0, off), zeros, src.narrow(1, off, rest)], 1);
+                var.copy_(&w);
+            });
+            report.widened.push(name);
+        }
+        let d = dims;
+        for (key, dim, slot, take) in [
+            ("norm.obs", d.obs, &mut agent.obs_norm, true),
+            ("norm.critic", d.critic, &mut agent.critic_norm, true),
+            ("norm.scan", d.scan, &mut agent.scan_norm, src_scan),
+        ] {
+            if !take {
+                continue;
+            }
+            let v = Vec::<f64>::try_from(&self.tensor(key)?.to_kind(Kind::Double))
+                .map_err(|e| err(&self.path, e.to_string()))?;
+            let frozen = slot.frozen;
+            *slot = RunningNorm::from_vec(dim, &v)
+                .ok_or_else(|| err(&self.path, format!("'{key}' does not fit {dim} dims")))?;
+            slot.frozen = frozen;
+        }
+        Ok(report)
     }
 
     /// Restore Adam's moments and step.

@@ -120,6 +120,8 @@ pub struct Trainer<'a, T: VecTask> {
     wall_offset: f64,
     pub times: PhaseTimes,
     stats: EpisodeStats,
+    /// What a fresh run took from `train.init_checkpoint`.
+    pub transfer: Option<crate::rl::checkpoint::Transfer>,
 }
 
 impl<'a, T: VecTask> Trainer<'a, T> {
@@ -137,8 +139,9 @@ impl<'a, T: VecTask> Trainer<'a, T> {
             (Some(path), None) => Some(Checkpoint::read(Path::new(path))?),
             _ => None,
         };
+        let mut transfer = None;
         if let Some(ck) = &init {
-            ck.load_agent(&mut agent)?;
+            transfer = Some(ck.transfer_agent(&mut agent)?);
         }
         let mirror = task.mirror();
         if cfg.ppo.symmetry && mirror.is_none() {
@@ -194,6 +197,7 @@ impl<'a, T: VecTask> Trainer<'a, T> {
             wall_offset,
             times: PhaseTimes::default(),
             stats,
+            transfer,
         })
     }
 
@@ -415,6 +419,9 @@ pub fn learn<T: VecTask>(
         cfg.ppo.num_steps,
         tr.agent.policy.num_parameters()
     ))?;
+    if let (Some(t), Some(path)) = (&tr.transfer, &cfg.train.init_checkpoint) {
+        run.log(&format!("initialized from {path}: {t}"))?;
+    }
     let mut last = (f64::NAN, f64::NAN);
     while tr.iteration < total {
         let it_start = Instant::now();
