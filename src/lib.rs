@@ -14,6 +14,7 @@
 //! * [`plot`] PNG training curves (a grid of line-chart panels) from a metrics CSV
 //! * [`bench`] the `dreampolicy bench ...` measurements
 pub mod bench;
+pub mod collect;
 pub mod config;
 pub mod data;
 pub mod env;

@@ -66,6 +66,24 @@ enum Command {
         #[command(subcommand)]
         which: TrainCommand,
     },
+    /// Roll out every terrain specialist on its terrain and write the expert
+    /// dataset (MCAP shards, one per specialist and round; existing shards are
+    /// kept and skipped, so the same command resumes a crashed collection).
+    Collect {
+        #[arg(long)]
+        config: PathBuf,
+        /// Override a config value: `--set n_envs=16` (repeatable).
+        #[arg(long = "set")]
+        sets: Vec<String>,
+        /// Dataset directory.
+        #[arg(long, default_value = "runs/dataset")]
+        out: PathBuf,
+        #[arg(long)]
+        quiet: bool,
+        /// Print the summary as one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
     /// Evaluate checkpoints on 10 m lanes: success and completion rates,
     /// velocity-tracking error, falls. Several checkpoints and terrains give the
     /// cross-terrain matrix (a table, JSON and a heatmap PNG).
@@ -319,6 +337,13 @@ fn run(cli: Cli) -> Result<()> {
             } => terrain_render(kind, then, level, map, config, sets, seed, out),
         },
         Command::Info { json } => info(json),
+        Command::Collect {
+            config,
+            sets,
+            out,
+            quiet,
+            json,
+        } => collect_cmd(&config, &sets, &out, quiet, json),
         Command::Eval {
             checkpoint,
             terrain,
@@ -688,6 +713,46 @@ fn eval_cmd(a: EvalArgs) -> Result<()> {
             }
         }
         println!("\nsuccess rate (completion rate):\n{t}");
+    }
+    Ok(())
+}
+
+fn collect_cmd(
+    config: &std::path::Path,
+    sets: &[String],
+    out: &std::path::Path,
+    quiet: bool,
+    json: bool,
+) -> Result<()> {
+    use dreampolicy::collect::{collect, CollectConfig};
+    let cfg = CollectConfig::load(config, sets)?;
+    let text = serde_yaml::to_string(&cfg)?;
+    let s = collect(&cfg, &text, out, quiet)
+        .with_context(|| format!("collecting into {}", out.display()))?;
+    let report = serde_json::to_string_pretty(&s)?;
+    std::fs::write(out.join("collect.json"), format!("{report}\n"))
+        .with_context(|| format!("writing {}", out.join("collect.json").display()))?;
+    if json {
+        println!("{}", serde_json::to_string(&s)?);
+    } else {
+        for sh in &s.shards {
+            if sh.skipped {
+                println!(
+                    "shard {:>3} {:<7} round {}: already there, skipped",
+                    sh.shard, sh.terrain, sh.round
+                );
+            } else {
+                println!(
+                    "shard {:>3} {:<7} round {}: {} frames, {} episodes ({} falls), {:.1} MB in {:.0} s",
+                    sh.shard, sh.terrain, sh.round, sh.frames, sh.episodes, sh.falls,
+                    sh.bytes as f64 / 1e6, sh.seconds
+                );
+            }
+        }
+        println!(
+            "{}: {} frames written in {:.0} s ({:.0} frames/s), {:.1} bytes/frame on disk ({} raw), {} falls in {} episodes",
+            s.dir, s.frames, s.seconds, s.frames_per_s, s.bytes_per_frame, s.raw_bytes_per_frame, s.falls, s.episodes
+        );
     }
     Ok(())
 }

@@ -1,0 +1,164 @@
+//! `collect`: specialists rolled out into an MCAP dataset. A tiny G1 policy
+//! trained for two iterations stands in for the specialists.
+mod common;
+
+use std::collections::BTreeMap;
+
+use common::{load_config, Scratch};
+use dreampolicy::collect::{collect, sha256_file, CollectConfig};
+use dreampolicy::data::{Dataset, DatasetStats, Dims, Frame};
+use dreampolicy::rl::runner;
+use dreampolicy::terrain::TerrainKind;
+
+fn tiny_policy(dir: &Scratch, name: &str, sets: &[&str]) -> std::path::PathBuf {
+    let mut all = vec!["train.iterations=2"];
+    all.extend_from_slice(sets);
+    let cfg = load_config("test/g1_tiny.yaml", &all);
+    runner::train(&cfg, &dir.0.join(name), false, true)
+        .unwrap()
+        .checkpoint
+}
+
+fn config(text: &str) -> CollectConfig {
+    CollectConfig::from_str(text, "test", &[]).unwrap()
+}
+
+#[test]
+fn collect_writes_whole_episodes_with_ids_flags_and_metadata() {
+    let dir = Scratch::new("collect");
+    let flat = tiny_policy(&dir, "flat", &[]);
+    let uneven = tiny_policy(
+        &dir,
+        "uneven",
+        &[
+            "env.terrain.mode=map",
+            "env.terrain.map.num_levels=3",
+            "env.terrain.map.num_cols=2",
+            "env.terrain.map.kinds={uneven: 1.0}",
+        ],
+    );
+    let text = format!(
+        "specialists:\n  - {{terrain: flat, checkpoint: {}}}\n  - {{terrain: uneven, checkpoint: {}}}\n\
+         n_envs: 3\nepisodes_per_env: 2\nrounds: 2\nepisode_length_s: 0.3\nthreads: 1\n",
+        flat.display(),
+        uneven.display()
+    );
+    let cfg = config(&text);
+    let out = dir.0.join("dataset");
+    let s = collect(&cfg, &text, &out, true).unwrap();
+    assert_eq!(s.shards.len(), 4);
+    // every env runs two episodes of at most 15 steps per round
+    assert_eq!(s.episodes, 4 * 3 * 2);
+    assert!(s.frames > 0 && s.frames <= 4 * 3 * 2 * 15, "{}", s.frames);
+    assert!(s.bytes_per_frame > 0.0 && s.frames_per_s > 0.0);
+
+    let ds = Dataset::open(&out, Default::default()).unwrap();
+    let meta = ds.first_meta().unwrap();
+    assert_eq!(meta.info.checkpoints["flat"], sha256_file(&flat).unwrap());
+    assert_eq!(
+        meta.info.checkpoints["uneven"],
+        sha256_file(&uneven).unwrap()
+    );
+    assert!(meta.info.config.contains("episodes_per_env: 2"));
+    assert!(!meta.info.mujoco_version.is_empty());
+
+    // frames: per episode, steps 0..len, the done flag on the last one only
+    let mut episodes: BTreeMap<(usize, u64), Vec<Frame>> = BTreeMap::new();
+    let mut n = 0u64;
+    for item in ds.frames() {
+        let (shard, f) = item.unwrap();
+        assert_eq!(f.state.len(), 98);
+        assert!(f
+            .state
+            .iter()
+            .chain(&f.action)
+            .chain(&f.scan)
+            .all(|x| x.is_finite()));
+        episodes.entry((shard, f.episode)).or_default().push(f);
+        n += 1;
+    }
+    assert_eq!(n, s.frames);
+    assert_eq!(episodes.len() as u64, s.episodes);
+    let mut kinds = BTreeMap::new();
+    for ((shard, _), frames) in &episodes {
+        let last = frames.len() - 1;
+        for (k, f) in frames.iter().enumerate() {
+            assert_eq!(f.step as usize, k);
+            assert_eq!(f.terminated || f.truncated, k == last);
+            assert_eq!(f.env, frames[0].env);
+        }
+        *kinds.entry((*shard, frames[0].terrain)).or_insert(0) += 1;
+        // within an episode the pelvis pose moves continuously
+        for w in frames.windows(2) {
+            let d = (0..3)
+                .map(|i| (w[1].pos[i] - w[0].pos[i]).powi(2))
+                .sum::<f64>();
+            assert!(d.sqrt() < 0.2, "pelvis jumped {} m", d.sqrt());
+        }
+    }
+    let per_shard: Vec<_> = kinds.into_iter().collect();
+    assert_eq!(
+        per_shard,
+        [
+            ((0, TerrainKind::Flat), 6),
+            ((1, TerrainKind::Flat), 6),
+            ((2, TerrainKind::Uneven), 6),
+            ((3, TerrainKind::Uneven), 6)
+        ]
+    );
+    // the stats were written over the whole dataset
+    DatasetStats::load(&out, Dims::G1).unwrap();
+
+    // a second run keeps every finished shard and redoes an unfinished one
+    let shard1 = out.join("shard-00001.mcap");
+    std::fs::rename(&shard1, out.join("shard-00001.mcap.tmp")).unwrap();
+    let again = collect(&cfg, &text, &out, true).unwrap();
+    let skipped: Vec<bool> = again.shards.iter().map(|s| s.skipped).collect();
+    assert_eq!(skipped, [true, false, true, true]);
+    assert!(shard1.exists() && !out.join("shard-00001.mcap.tmp").exists());
+}
+
+#[test]
+fn collect_refuses_mismatched_specialists_and_bad_configs() {
+    let dir = Scratch::new("collect-bad");
+    let flat = tiny_policy(&dir, "flat", &[]);
+    let text = format!(
+        "specialists:\n  - {{terrain: stair, checkpoint: {}}}\nn_envs: 2\nepisode_length_s: 0.2\nthreads: 1\n",
+        flat.display()
+    );
+    let e = collect(&config(&text), &text, &dir.0.join("ds"), true)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("stair") && e.contains("plane"), "{e}");
+
+    let e = CollectConfig::from_str("specialists: []\n", "t", &[])
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("specialists is empty"), "{e}");
+    let e = CollectConfig::from_str(
+        "specialists: [{terrain: lava, checkpoint: x.pt}]\n",
+        "t",
+        &[],
+    )
+    .err()
+    .unwrap()
+    .to_string();
+    assert!(e.contains("lava"), "{e}");
+    let e = CollectConfig::from_str(
+        "specialists: [{terrain: flat, checkpoint: x.pt}]\nenvs: 3\n",
+        "t",
+        &[],
+    )
+    .err()
+    .unwrap()
+    .to_string();
+    assert!(e.contains("envs"), "{e}");
+    let text = "specialists: [{terrain: flat, checkpoint: /nonexistent/x.pt}]\n";
+    let e = collect(&config(text), text, &dir.0.join("ds2"), true)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("/nonexistent/x.pt"), "{e}");
+}
