@@ -69,7 +69,7 @@ pub fn run(a: PlayArgs) -> Result<()> {
     };
     let lane = match (s.level, s.lane_length, s.reached_goal) {
         (Some(l), Some(len), Some(goal)) => format!(
-            " level {l}, {len:.1} m lane{}",
+            ", level {l}, {len:.1} m lane{}",
             if goal { ", goal reached" } else { "" }
         ),
         _ => String::new(),

@@ -312,6 +312,29 @@ fn play_on_an_uneven_lane_draws_its_heightfield() {
             (lo.min(z), hi.max(z))
         });
     assert!(hi - lo > 0.1, "heights {lo}..{hi}");
+    // the mesh is the ground the physics sees: under the pelvis, at every frame,
+    // the mesh's height (MuJoCo's diagonal split) is pelvis z - base_height
+    let xs: BTreeSet<i64> = points.iter().map(|q| (f(q, "x") * 1e4) as i64).collect();
+    let w = xs.len();
+    let (x0, y0) = (f(&points[0], "x"), f(&points[0], "y"));
+    let hs = f(&points[1], "x") - x0;
+    let z = |i: usize, j: usize| f(&points[j * w + i], "z");
+    for (_, st) in &p.messages["/state"] {
+        let (u, v) = ((f(st, "x") - x0) / hs, (f(st, "y") - y0) / hs);
+        let (i, j) = (u.floor() as usize, v.floor() as usize);
+        let (u, v) = (u - i as f64, v - j as f64);
+        let (a, b, c, d) = (z(i, j), z(i + 1, j), z(i, j + 1), z(i + 1, j + 1));
+        let mesh = if u >= v {
+            a + u * (b - a) + v * (d - b)
+        } else {
+            a + v * (c - a) + u * (d - c)
+        };
+        let ground = f(st, "z") - f(st, "base_height");
+        assert!(
+            (mesh - ground).abs() < 1e-3,
+            "mesh {mesh} vs ground {ground}"
+        );
+    }
     // the robot starts on the lane's centre line, 1 m into its tile
     let first = &p.messages["/state"][0].1;
     assert!(f(first, "base_height") > 0.7);
