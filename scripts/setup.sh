@@ -3,16 +3,19 @@
 # second run checks what is there and only redoes what is missing.
 #
 #   1. Debian packages: libmujoco-dev (MuJoCo 2.2.2), clang/libclang (bindgen), unzip, python3-pip,
-#      fonts-dejavu-core (the TrueType font of the training-curve PNGs, src/plot.rs)
+#      python3-venv, fonts-dejavu-core (the TrueType font of the training-curve PNGs, src/plot.rs)
 #   2. Registry wheels pinned by hash (scripts/wheels.lock), unpacked, never imported:
 #        third_party/libtorch/torch      libtorch 2.13 for tch 0.26 (+ nvidia/ runtime libs)
 #        third_party/mujoco-3.3.7        MuJoCo 3.3.7 headers + library (MUJOCO_DIR build)
 #        models/unitree_g1               the Unitree G1 29-DOF MJCF + meshes (from mjlab)
 #      and models/unitree_g1/g1_armature.xml: the vendor g1.xml with joint armature from
 #      models/g1/armature.txt (scripts/g1_armature.py; rewritten only when stale)
-#   3. cargo build --release
+#   3. The reference Python MCAP reader of CI's cross-language checks: mcap, zstandard, lz4
+#      pinned by hash (scripts/python.lock) in the venv third_party/pyenv (Debian 12's
+#      pip refuses global installs); reinstalled when the lock file changes
+#   4. cargo build --release
 #
-# Env: SKIP_BUILD=1 skips step 3; DREAMPOLICY_WHEEL_CACHE=<dir> reuses downloaded wheels.
+# Env: SKIP_BUILD=1 skips step 4; DREAMPOLICY_WHEEL_CACHE=<dir> reuses downloaded wheels.
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -20,7 +23,7 @@ cd "$ROOT"
 log() { printf '[setup] %s\n' "$*"; }
 
 # --- 1. Debian packages -------------------------------------------------------
-APT_PKGS=(libmujoco-dev libclang-dev clang pkg-config unzip python3 python3-pip ca-certificates curl build-essential fonts-dejavu-core)
+APT_PKGS=(libmujoco-dev libclang-dev clang pkg-config unzip python3 python3-pip python3-venv ca-certificates curl build-essential fonts-dejavu-core)
 missing=()
 for p in "${APT_PKGS[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
@@ -103,7 +106,20 @@ fi
 # every run: regenerates the file if it is missing or differs from what the table gives
 "$PY" scripts/g1_armature.py
 
-# --- 3. Build -------------------------------------------------------------------
+# --- 3. Python reference readers (venv) ----------------------------------------
+PYENV="$ROOT/third_party/pyenv"
+if ! cmp -s scripts/python.lock "$PYENV/.done"; then
+  log "venv third_party/pyenv: pip install (hash-checked) scripts/python.lock"
+  rm -rf "$PYENV"
+  "$PY" -m venv "$PYENV"
+  "$PYENV/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps \
+    --only-binary=:all: --require-hashes -r scripts/python.lock
+  cp scripts/python.lock "$PYENV/.done"
+else
+  log "venv third_party/pyenv up to date"
+fi
+
+# --- 4. Build -------------------------------------------------------------------
 if [ "${SKIP_BUILD:-0}" != "1" ]; then
   log "cargo build --release"
   cargo build --release --workspace --all-targets

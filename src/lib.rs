@@ -7,6 +7,7 @@
 //! * [`terrain`] procedural heightfields: terrain kinds, curriculum map, lanes, PNGs
 //! * [`env`] the locomotion env and the batched `VecEnv`
 //! * [`eval`] lane evaluation: success and completion rates, tracking error
+//! * [`play`] one rollout of a checkpoint written as an MCAP file for Foxglove
 //! * [`rl`] PPO on libtorch: actor-critic, storage, normalizers, checkpoints, runner
 //! * [`config`] serde structs of the YAML experiment files
 //! * [`data`] the expert dataset: MCAP shards of frames, windows, split, shuffle, stats
@@ -19,6 +20,7 @@ pub mod config;
 pub mod data;
 pub mod env;
 pub mod eval;
+pub mod play;
 pub mod plot;
 pub mod rl;
 pub mod robot;

@@ -8,6 +8,7 @@ use clap::{Parser, Subcommand};
 use dreampolicy::{bench, config, robot, sim};
 
 mod data_cli;
+mod play_cli;
 
 #[derive(Parser)]
 #[command(
@@ -119,6 +120,9 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Roll a checkpoint's policy out on one lane and write the rollout as an
+    /// MCAP file for Foxglove (transforms, robot, terrain, command, state, reward).
+    Play(play_cli::PlayArgs),
     /// Draw a run directory's training curves (plots/training.png) from its metrics.csv.
     Plot {
         /// Run directory.
@@ -365,6 +369,7 @@ fn run(cli: Cli) -> Result<()> {
             heatmap,
             json,
         }),
+        Command::Play(args) => play_cli::run(args),
         Command::Plot { run } => {
             let out = dreampolicy::rl::runner::plot_run(&run)
                 .with_context(|| format!("plotting {}", run.display()))?;

@@ -390,6 +390,11 @@ impl Model {
         // SAFETY: nbody ints.
         unsafe { slice(self.raw().body_parentid, self.nbody()) }
     }
+    /// Position of each body's frame in its parent's frame.
+    pub fn body_pos(&self) -> &[[f64; 3]] {
+        // SAFETY: 3*nbody doubles.
+        unsafe { slice(self.raw().body_pos as *const [f64; 3], self.nbody()) }
+    }
     /// Total mass of the subtree rooted at each body.
     pub fn body_subtreemass(&self) -> &[f64] {
         // SAFETY: nbody doubles.
@@ -406,6 +411,11 @@ impl Model {
     pub fn geom_dataid(&self) -> &[i32] {
         // SAFETY: ngeom ints.
         unsafe { slice(self.raw().geom_dataid, self.ngeom()) }
+    }
+    /// Geom sizes: radius, half-length or half-extents, by geom type (MuJoCo's `geom_size`).
+    pub fn geom_size(&self) -> &[[f64; 3]] {
+        // SAFETY: 3*ngeom doubles.
+        unsafe { slice(self.raw().geom_size as *const [f64; 3], self.ngeom()) }
     }
     pub fn geom_pos(&self) -> &[[f64; 3]] {
         // SAFETY: 3*ngeom doubles.

@@ -1,0 +1,90 @@
+//! `dreampolicy play`: a checkpoint's rollout on one lane, written as an MCAP
+//! file for Foxglove.
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+
+use dreampolicy::play::{self, PlayOptions};
+use dreampolicy::rl::checkpoint::Checkpoint;
+use dreampolicy::terrain::TerrainKind;
+
+/// Arguments of `play`.
+#[derive(clap::Args)]
+pub struct PlayArgs {
+    #[arg(long)]
+    checkpoint: PathBuf,
+    /// Terrain of the lane: flat, uneven, stair, gap, bridge, wave, slope,
+    /// balancing_beam, slope_bridge.
+    #[arg(long, default_value = "flat")]
+    terrain: String,
+    /// The MCAP file to write (replaced if it exists).
+    #[arg(long)]
+    out: PathBuf,
+    /// Simulated seconds (the rollout stops earlier at a fall).
+    #[arg(long, default_value_t = play::DEFAULT_SECONDS)]
+    seconds: f64,
+    /// Commanded forward speed in m/s (default: the middle of the config's eval.lin_vel_x).
+    #[arg(long, allow_negative_numbers = true)]
+    speed: Option<f64>,
+    /// Curriculum level of the lane (default: the config's eval.level).
+    #[arg(long)]
+    level: Option<usize>,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Play on the project's default scene (full collisions, MuJoCo's default
+    /// solver) instead of the checkpoint's training scene.
+    #[arg(long)]
+    full_collision: bool,
+    /// libtorch threads.
+    #[arg(long, default_value_t = 1)]
+    threads: i32,
+    /// Print the summary as one JSON object.
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn run(a: PlayArgs) -> Result<()> {
+    let terrain = TerrainKind::from_name(&a.terrain)?;
+    let ck = Checkpoint::read(&a.checkpoint)?;
+    tch::set_num_threads(a.threads.max(1));
+    let opts = PlayOptions {
+        terrain,
+        level: a.level,
+        seconds: a.seconds,
+        speed: a.speed,
+        seed: a.seed,
+        full_collision: a.full_collision,
+        out: a.out.clone(),
+    };
+    let s = play::play(&ck, &opts).with_context(|| format!("playing into {}", a.out.display()))?;
+    if a.json {
+        println!("{}", serde_json::to_string(&s)?);
+        return Ok(());
+    }
+    let ending = match s.ending {
+        play::Ending::TimeUp => "ran its time".to_string(),
+        play::Ending::Fell => format!("FELL at {:.2} s", s.seconds),
+        play::Ending::BlowUp => format!("physics blew up at {:.2} s", s.seconds),
+        play::Ending::LeftMap => format!("walked off the map at {:.2} s", s.seconds),
+    };
+    let lane = match (s.level, s.lane_length, s.reached_goal) {
+        (Some(l), Some(len), Some(goal)) => format!(
+            ", level {l}, {len:.1} m lane{}",
+            if goal { ", goal reached" } else { "" }
+        ),
+        _ => String::new(),
+    };
+    println!(
+        "{}: {} ({}{lane}), {} steps, {:.2} m at {:.2} m/s (commanded {:.2}), {ending}; {} frames, {:.2} MB",
+        s.out,
+        s.terrain,
+        if s.full_collision { "full collision" } else { "training scene" },
+        s.steps,
+        s.distance,
+        s.mean_forward_speed,
+        s.commanded_speed,
+        s.frames,
+        s.file_bytes as f64 / 1e6
+    );
+    Ok(())
+}
