@@ -9,11 +9,14 @@
 //! * [`eval`] lane evaluation: success and completion rates, tracking error
 //! * [`rl`] PPO on libtorch: actor-critic, storage, normalizers, checkpoints, runner
 //! * [`config`] serde structs of the YAML experiment files
+//! * [`world_model`] the terrain-aware autoregressive diffusion world model: DiT denoiser, DDPM/DDIM, CFG, scheduled-sampling trainer, rollout
 //! * [`data`] the expert dataset: MCAP shards of frames, windows, split, shuffle, stats
+//! * [`checkpoint`] checkpoint files shared by the trainers: named tensors + a JSON record, written atomically
 //! * [`run`] run directories (config.yaml, metrics.csv, log.txt) and progress bars
 //! * [`plot`] PNG training curves (a grid of line-chart panels) from a metrics CSV
 //! * [`bench`] the `dreampolicy bench ...` measurements
 pub mod bench;
+pub mod checkpoint;
 pub mod config;
 pub mod data;
 pub mod env;
@@ -24,3 +27,4 @@ pub mod robot;
 pub mod run;
 pub mod sim;
 pub mod terrain;
+pub mod world_model;

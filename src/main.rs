@@ -118,6 +118,8 @@ enum Command {
 enum TrainCommand {
     /// PPO specialist (the flat walker, a terrain specialist) on the G1 env.
     Specialist(TrainArgs),
+    /// The diffusion world model on an expert dataset (configs/world_model/*.yaml).
+    WorldModel(TrainArgs),
 }
 
 /// What every trainer takes.
@@ -359,6 +361,7 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Train { which } => match which {
             TrainCommand::Specialist(args) => train_specialist(args),
+            TrainCommand::WorldModel(args) => train_world_model(args),
         },
         Command::Data { which } => data_cli::run(which),
         Command::Bench { which } => match which {
@@ -452,25 +455,57 @@ fn train_specialist(args: TrainArgs) -> Result<()> {
         None => {
             let path = args.config.as_ref().context("--config is required")?;
             let cfg = config::load(path, &sets)?;
-            let stem = path
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_else(|| "run".into());
-            let out = args
-                .out
-                .clone()
-                .unwrap_or_else(|| PathBuf::from("runs").join(stem));
-            if runner::latest_checkpoint(&out).exists() {
-                anyhow::bail!(
-                    "{} already holds a run: continue it with --resume {0}, or choose another --out",
-                    out.display()
-                );
-            }
-            (cfg, out)
+            (cfg, fresh_run_dir(path, args.out.as_ref())?)
         }
     };
     let s = runner::train(&cfg, &run_path, args.resume.is_some(), args.quiet)
         .with_context(|| format!("training in {}", run_path.display()))?;
+    println!("{}", serde_json::to_string(&s)?);
+    Ok(())
+}
+
+/// The run directory of a fresh run: `--out`, or `runs/<config name>`; refused
+/// when it already holds a run.
+fn fresh_run_dir(config: &std::path::Path, out: Option<&PathBuf>) -> Result<PathBuf> {
+    let stem = config
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "run".into());
+    let out = out
+        .cloned()
+        .unwrap_or_else(|| PathBuf::from("runs").join(stem));
+    if dreampolicy::run::latest_checkpoint(&out).exists() {
+        anyhow::bail!(
+            "{} already holds a run: continue it with --resume {0}, or choose another --out",
+            out.display()
+        );
+    }
+    Ok(out)
+}
+
+fn train_world_model(args: TrainArgs) -> Result<()> {
+    use dreampolicy::world_model;
+    let mut sets = args.sets.clone();
+    if let Some(seed) = args.seed {
+        sets.push(format!("train.seed={seed}"));
+    }
+    if let Some(t) = args.threads {
+        sets.push(format!("train.torch_threads={t}"));
+    }
+    let (cfg, run_path) = match &args.resume {
+        Some(dir) => {
+            let cfg = config::load_world_model(&dir.join("config.yaml"), &sets)
+                .with_context(|| format!("resuming {}", dir.display()))?;
+            (cfg, dir.clone())
+        }
+        None => {
+            let path = args.config.as_ref().context("--config is required")?;
+            let cfg = config::load_world_model(path, &sets)?;
+            (cfg, fresh_run_dir(path, args.out.as_ref())?)
+        }
+    };
+    let s = world_model::train(&cfg, &run_path, args.resume.is_some(), args.quiet)
+        .with_context(|| format!("training the world model in {}", run_path.display()))?;
     println!("{}", serde_json::to_string(&s)?);
     Ok(())
 }
