@@ -198,6 +198,29 @@ enum BenchCommand {
         #[arg(long)]
         config_only: bool,
     },
+    /// World-model sampling latency at batch 1 (DDPM, DDIM 5/10/20) against the
+    /// control period, and the denoiser's forward against bare GEMMs of its shapes.
+    WorldModel {
+        #[arg(long)]
+        json: bool,
+        #[arg(long, default_value = "configs/world_model/small.yaml")]
+        config: PathBuf,
+        #[arg(long = "set")]
+        sets: Vec<String>,
+        /// The paper-sized config measured beside it.
+        #[arg(long, default_value = "configs/world_model/paper.yaml")]
+        paper_config: PathBuf,
+        /// Batch of the paper size's forward measurement (its trainer's 1024 is
+        /// minutes per round on a CPU).
+        #[arg(long, default_value_t = 128)]
+        paper_batch: i64,
+        /// Timed rounds per measurement (after one warm-up); the best counts.
+        #[arg(long, default_value_t = 3)]
+        rounds: usize,
+        /// Only the config's size.
+        #[arg(long)]
+        config_only: bool,
+    },
     /// Raw mj_step vs our safe Data::step on the standing G1.
     Sim {
         #[arg(long)]
@@ -389,6 +412,50 @@ fn run(cli: Cli) -> Result<()> {
                             "{:<18} {:>8} params: {:>6.0} env-steps/s; physics {:.2} inference {:.2} update {:.2}; inference/GEMM {:.2}; update {:.0} samples/s",
                             v.name, v.parameters, v.env_steps_per_s, v.share_physics, v.share_inference,
                             v.share_update, v.inference_gemm_fraction, v.update_samples_per_s
+                        );
+                    }
+                }
+                Ok(())
+            }
+            BenchCommand::WorldModel {
+                json,
+                config,
+                sets,
+                paper_config,
+                paper_batch,
+                rounds,
+                config_only,
+            } => {
+                let cfg = config::load_world_model(&config, &sets)?;
+                let paper = if config_only {
+                    None
+                } else {
+                    Some(config::load_world_model(&paper_config, &[])?)
+                };
+                tch::set_num_threads(cfg.train.torch_threads as i32);
+                let r = bench::world_model::world_model(
+                    &cfg,
+                    paper.as_ref().map(|p| (p, paper_batch.max(1))),
+                    rounds,
+                );
+                if json {
+                    println!("{}", serde_json::to_string(&r)?);
+                } else {
+                    println!(
+                        "{} torch threads, control period {} ms",
+                        r.torch_threads, r.control_period_ms
+                    );
+                    for v in &r.variants {
+                        let lat: Vec<String> = v
+                            .batch1_ms
+                            .iter()
+                            .map(|(k, ms)| format!("{k} {ms:.1} ms"))
+                            .collect();
+                        println!(
+                            "{:<7} {} x {} ({} params): batch 1 {}; DDIM10 / control period {:.2}; forward at batch {} {:.1} GFLOP/s vs GEMMs {:.1}: gemm_fraction {:.2}",
+                            v.name, v.layers, v.hidden, v.parameters, lat.join(", "),
+                            v.ddim10_vs_control_period, v.forward_batch, v.forward_gflops,
+                            v.gemm_gflops, v.gemm_fraction
                         );
                     }
                 }

@@ -139,7 +139,14 @@ impl WmTrainer {
     ) -> Result<WmTrainer, WmError> {
         tch::set_num_threads(cfg.train.torch_threads as i32);
         tch::manual_seed(cfg.train.seed as i64);
-        let dataset = Dataset::open(Path::new(&cfg.data.path), ReadOptions::default())?;
+        let path = Path::new(&cfg.data.path);
+        if !path.exists() {
+            return Err(WmError::Invalid(format!(
+                "data.path {}: no such dataset (a directory of MCAP shards: `dreampolicy bench data --out DIR` writes a synthetic one)",
+                path.display()
+            )));
+        }
+        let dataset = Dataset::open(path, ReadOptions::default())?;
         let dims = dataset.dims();
         let dev = device();
         let norm = match resume {
