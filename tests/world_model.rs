@@ -433,6 +433,8 @@ fn rollout_chains_calls_and_reads_the_terrain_per_call() {
 
 #[test]
 fn bad_configs_and_checkpoints_are_clear_errors() {
+    // it builds trainers, which seed libtorch's global generator
+    let _t = torch_lock();
     let dir = Scratch::new("wm-bad");
     let base = "data: {path: runs/dataset}\n";
     let err = |sets: &[&str]| {

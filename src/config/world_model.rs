@@ -170,7 +170,8 @@ pub struct WmTrainConfig {
     pub learning_rate: f64,
     /// Global gradient-norm clip (0 = none).
     pub max_grad_norm: f64,
-    /// EMA of the weights used for sampling and validation (per step).
+    /// EMA of the weights used for sampling and validation (per step; warmed
+    /// up: the decay after Adam step `s` is `min(ema_decay, (1 + s) / (10 + s))`).
     pub ema_decay: f64,
     /// `T`: consecutive windows per drawn sequence, one step each; the history of
     /// window `t + 1` may come from the model's own sample of window `t`

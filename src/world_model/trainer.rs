@@ -4,7 +4,8 @@
 //! rollout_windows`, at most 4). For `t = 1..=T`, one gradient step: noise the
 //! clean chunk `x_t^0` to a uniform step `n in 1..=N`, predict `x0_hat = G(x_t^n,
 //! x_{t-1}, n, y_t)` (terrain dropped to the null embedding with probability
-//! `diffusion.terrain_drop`), minimize `||x0_hat - x_t^0||^2`, Adam, EMA. Then,
+//! `diffusion.terrain_drop`), minimize `||x0_hat - x_t^0||^2`, Adam, EMA (decay
+//! `min(ema_decay, (1 + s) / (10 + s))` after Adam step `s`). Then,
 //! per sequence, with probability `p = rollout_probability(iter, I_1, I_2)` the
 //! next window's history takes the model's own sample of chunk `t` (the
 //! sampler `train.rollout_sampling` with the live weights, started from
@@ -256,7 +257,10 @@ impl WmTrainer {
                 f64::NAN
             };
             self.opt.step();
-            self.ema.ema_update(&self.net, c.train.ema_decay);
+            // EMA warm-up: early on the average would still be mostly the init
+            let done = self.opt.step as f64;
+            let decay = c.train.ema_decay.min((1.0 + done) / (10.0 + done));
+            self.ema.ema_update(&self.net, decay);
             let p = rollout_probability(
                 self.iteration,
                 c.train.supervised_iterations,
