@@ -56,6 +56,12 @@ pub struct BenchDataArgs {
     /// Alternating rounds (raw, file, windows); the best of each counts.
     #[arg(long, default_value_t = 3)]
     rounds: usize,
+    /// World-model config whose trainer the reader is set against (`headroom`).
+    #[arg(long, default_value = "configs/world_model/small.yaml")]
+    wm_config: PathBuf,
+    /// Skip the headroom measurement.
+    #[arg(long)]
+    no_headroom: bool,
 }
 
 pub fn run(cmd: DataCommand) -> Result<()> {
@@ -122,6 +128,14 @@ pub fn run(cmd: DataCommand) -> Result<()> {
 
 pub fn bench_data(a: BenchDataArgs) -> Result<()> {
     let spec = WindowSpec::new(a.history, a.horizon)?;
+    let wm = if a.no_headroom {
+        None
+    } else {
+        let cfg = dreampolicy::config::load_world_model(&a.wm_config, &[])
+            .with_context(|| "the headroom needs a world-model config (--no-headroom skips it)")?;
+        tch::set_num_threads(cfg.train.torch_threads as i32);
+        Some(cfg)
+    };
     let r = bench::data::data(
         a.dir.as_deref(),
         a.out.as_deref(),
@@ -129,6 +143,7 @@ pub fn bench_data(a: BenchDataArgs) -> Result<()> {
         spec,
         a.shuffle,
         a.rounds,
+        wm.as_ref(),
     )
     .context("bench data")?;
     if a.json {
@@ -140,6 +155,15 @@ pub fn bench_data(a: BenchDataArgs) -> Result<()> {
             r.windows_per_s, r.window_frames_per_s, r.raw_frames_per_s, r.read_vs_raw,
             r.file_mb_per_s, r.read_vs_file
         );
+        if let (Some(h), Some(rd), Some(tr)) = (
+            r.headroom,
+            r.reader_sequences_per_s,
+            r.trainer_sequences_per_s,
+        ) {
+            println!(
+                "headroom {h:.0}: the reader gives {rd:.0} sequences/s at the world-model trainer's spec, the trainer takes {tr:.1}/s"
+            );
+        }
     }
     Ok(())
 }

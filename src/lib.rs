@@ -10,11 +10,15 @@
 //! * [`play`] one rollout of a checkpoint written as an MCAP file for Foxglove
 //! * [`rl`] PPO on libtorch: actor-critic, storage, normalizers, checkpoints, runner
 //! * [`config`] serde structs of the YAML experiment files
+//! * [`world_model`] the terrain-aware autoregressive diffusion world model: DiT denoiser, DDPM/DDIM, CFG, scheduled-sampling trainer, rollout
 //! * [`data`] the expert dataset: MCAP shards of frames, windows, split, shuffle, stats
+//! * [`checkpoint`] checkpoint files shared by the trainers: named tensors + a JSON record, written atomically
 //! * [`run`] run directories (config.yaml, metrics.csv, log.txt) and progress bars
 //! * [`plot`] PNG training curves (a grid of line-chart panels) from a metrics CSV
+//! * [`collect`] the expert dataset's collection: specialists rolled out into MCAP shards
 //! * [`bench`] the `dreampolicy bench ...` measurements
 pub mod bench;
+pub mod checkpoint;
 pub mod collect;
 pub mod config;
 pub mod data;
@@ -27,3 +31,4 @@ pub mod robot;
 pub mod run;
 pub mod sim;
 pub mod terrain;
+pub mod world_model;

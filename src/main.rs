@@ -151,6 +151,8 @@ enum Command {
 enum TrainCommand {
     /// PPO specialist (the flat walker, a terrain specialist) on the G1 env.
     Specialist(TrainArgs),
+    /// The diffusion world model on an expert dataset (configs/world_model/*.yaml).
+    WorldModel(TrainArgs),
 }
 
 /// What every trainer takes.
@@ -226,6 +228,29 @@ enum BenchCommand {
         #[arg(long, default_value_t = 5)]
         iterations: usize,
         /// Only the config's network (skip the paper-sized variants).
+        #[arg(long)]
+        config_only: bool,
+    },
+    /// World-model sampling latency at batch 1 (DDPM, DDIM 5/10/20) against the
+    /// control period, and the denoiser's forward against bare GEMMs of its shapes.
+    WorldModel {
+        #[arg(long)]
+        json: bool,
+        #[arg(long, default_value = "configs/world_model/small.yaml")]
+        config: PathBuf,
+        #[arg(long = "set")]
+        sets: Vec<String>,
+        /// The paper-sized config measured beside it.
+        #[arg(long, default_value = "configs/world_model/paper.yaml")]
+        paper_config: PathBuf,
+        /// Batch of the paper size's forward measurement (its trainer's 1024 is
+        /// minutes per round on a CPU).
+        #[arg(long, default_value_t = 128)]
+        paper_batch: i64,
+        /// Timed rounds per measurement (after one warm-up); the best counts.
+        #[arg(long, default_value_t = 3)]
+        rounds: usize,
+        /// Only the config's size.
         #[arg(long)]
         config_only: bool,
     },
@@ -384,6 +409,7 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Train { which } => match which {
             TrainCommand::Specialist(args) => train_specialist(args),
+            TrainCommand::WorldModel(args) => train_world_model(args),
         },
         Command::Data { which } => data_cli::run(which),
         Command::Bench { which } => match which {
@@ -411,6 +437,50 @@ fn run(cli: Cli) -> Result<()> {
                             "{:<18} {:>8} params: {:>6.0} env-steps/s; physics {:.2} inference {:.2} update {:.2}; inference/GEMM {:.2}; update {:.0} samples/s",
                             v.name, v.parameters, v.env_steps_per_s, v.share_physics, v.share_inference,
                             v.share_update, v.inference_gemm_fraction, v.update_samples_per_s
+                        );
+                    }
+                }
+                Ok(())
+            }
+            BenchCommand::WorldModel {
+                json,
+                config,
+                sets,
+                paper_config,
+                paper_batch,
+                rounds,
+                config_only,
+            } => {
+                let cfg = config::load_world_model(&config, &sets)?;
+                let paper = if config_only {
+                    None
+                } else {
+                    Some(config::load_world_model(&paper_config, &[])?)
+                };
+                tch::set_num_threads(cfg.train.torch_threads as i32);
+                let r = bench::world_model::world_model(
+                    &cfg,
+                    paper.as_ref().map(|p| (p, paper_batch.max(1))),
+                    rounds,
+                );
+                if json {
+                    println!("{}", serde_json::to_string(&r)?);
+                } else {
+                    println!(
+                        "{} torch threads, control period {} ms",
+                        r.torch_threads, r.control_period_ms
+                    );
+                    for v in &r.variants {
+                        let lat: Vec<String> = v
+                            .batch1_ms
+                            .iter()
+                            .map(|(k, ms)| format!("{k} {ms:.1} ms"))
+                            .collect();
+                        println!(
+                            "{:<7} {} x {} ({} params): batch 1 {}; DDIM10 / control period {:.2}; forward at batch {} {:.1} GFLOP/s vs GEMMs {:.1}: gemm_fraction {:.2}",
+                            v.name, v.layers, v.hidden, v.parameters, lat.join(", "),
+                            v.ddim10_vs_control_period, v.forward_batch, v.forward_gflops,
+                            v.gemm_gflops, v.gemm_fraction
                         );
                     }
                 }
@@ -477,25 +547,57 @@ fn train_specialist(args: TrainArgs) -> Result<()> {
         None => {
             let path = args.config.as_ref().context("--config is required")?;
             let cfg = config::load(path, &sets)?;
-            let stem = path
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_else(|| "run".into());
-            let out = args
-                .out
-                .clone()
-                .unwrap_or_else(|| PathBuf::from("runs").join(stem));
-            if runner::latest_checkpoint(&out).exists() {
-                anyhow::bail!(
-                    "{} already holds a run: continue it with --resume {0}, or choose another --out",
-                    out.display()
-                );
-            }
-            (cfg, out)
+            (cfg, fresh_run_dir(path, args.out.as_ref())?)
         }
     };
     let s = runner::train(&cfg, &run_path, args.resume.is_some(), args.quiet)
         .with_context(|| format!("training in {}", run_path.display()))?;
+    println!("{}", serde_json::to_string(&s)?);
+    Ok(())
+}
+
+/// The run directory of a fresh run: `--out`, or `runs/<config name>`; refused
+/// when it already holds a run.
+fn fresh_run_dir(config: &std::path::Path, out: Option<&PathBuf>) -> Result<PathBuf> {
+    let stem = config
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "run".into());
+    let out = out
+        .cloned()
+        .unwrap_or_else(|| PathBuf::from("runs").join(stem));
+    if dreampolicy::run::latest_checkpoint(&out).exists() {
+        anyhow::bail!(
+            "{} already holds a run: continue it with --resume {0}, or choose another --out",
+            out.display()
+        );
+    }
+    Ok(out)
+}
+
+fn train_world_model(args: TrainArgs) -> Result<()> {
+    use dreampolicy::world_model;
+    let mut sets = args.sets.clone();
+    if let Some(seed) = args.seed {
+        sets.push(format!("train.seed={seed}"));
+    }
+    if let Some(t) = args.threads {
+        sets.push(format!("train.torch_threads={t}"));
+    }
+    let (cfg, run_path) = match &args.resume {
+        Some(dir) => {
+            let cfg = config::load_world_model(&dir.join("config.yaml"), &sets)
+                .with_context(|| format!("resuming {}", dir.display()))?;
+            (cfg, dir.clone())
+        }
+        None => {
+            let path = args.config.as_ref().context("--config is required")?;
+            let cfg = config::load_world_model(path, &sets)?;
+            (cfg, fresh_run_dir(path, args.out.as_ref())?)
+        }
+    };
+    let s = world_model::train(&cfg, &run_path, args.resume.is_some(), args.quiet)
+        .with_context(|| format!("training the world model in {}", run_path.display()))?;
     println!("{}", serde_json::to_string(&s)?);
     Ok(())
 }

@@ -1,7 +1,8 @@
 //! Run directories and progress: what every long job writes and shows.
 //!
 //! A run directory holds `config.yaml` (the resolved config), `metrics.csv` (one
-//! row per logging step, header first) and `log.txt`. Progress is an `indicatif`
+//! row per logging step, header first), `log.txt`, `checkpoints/latest.pt` (the
+//! resume checkpoint) and `checkpoints/iter_NNNNNN.pt` (kept copies). Progress is an `indicatif`
 //! bar with rate and ETA on a terminal; with `--quiet` or when stderr is not a
 //! terminal it falls back to plain log lines.
 use std::fs::{File, OpenOptions};
@@ -31,6 +32,20 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> RunError + '_ {
         path: path.to_path_buf(),
         source,
     }
+}
+
+/// The latest resume checkpoint of a run directory: `checkpoints/latest.pt`.
+pub fn latest_checkpoint(run_dir: &Path) -> PathBuf {
+    run_dir.join("checkpoints").join("latest.pt")
+}
+
+/// Copy `checkpoints/latest.pt` to `checkpoints/iter_NNNNNN.pt` (kept checkpoints).
+pub fn keep_checkpoint(run_dir: &Path, iteration: usize) -> Result<PathBuf, RunError> {
+    let keep = run_dir
+        .join("checkpoints")
+        .join(format!("iter_{iteration:06}.pt"));
+    std::fs::copy(latest_checkpoint(run_dir), &keep).map_err(io(&keep))?;
+    Ok(keep)
 }
 
 /// An open run directory.

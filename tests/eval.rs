@@ -239,10 +239,12 @@ fn terrain_lanes_are_walked_and_episodes_spread_over_lanes() {
         r.completion_rate
     );
 
-    // a level the terrain config does not have is a clear error
-    let dir3 = Scratch::new("eval-lanes3");
-    let ck = tiny_checkpoint(&dir3, &["eval.level=12"]);
-    let e = evaluate(&ck, &o).err().unwrap().to_string();
+    // a level the lanes' terrain table does not have is a clear config error
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/test/g1_tiny.yaml");
+    let e = dreampolicy::config::load(&path, &["eval.level=12".to_string()])
+        .err()
+        .unwrap()
+        .to_string();
     assert!(
         e.contains("eval.level 12") && e.contains("top level 9"),
         "{e}"

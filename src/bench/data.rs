@@ -1,8 +1,10 @@
 //! `bench data`: the window reader (MCAP decode, frames, windows, shuffle buffer)
 //! against a raw sequential read of the same shards in the same run: the MCAP
 //! records streamed and decompressed with every message payload touched but not
-//! decoded (`raw`), and the plain file bytes (`file`). The world-model trainer's
-//! samples/s (`headroom`) is not measured yet: that trainer does not exist.
+//! decoded (`raw`), and the plain file bytes (`file`). With a world-model config,
+//! also the `headroom`: the reader's sequences/s at that trainer's window spec
+//! (`K + T H` frames) over the trainer's sequences/s on the same shards (its
+//! fully supervised phase, the one that asks the most of the data).
 use std::fs::File;
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -46,6 +48,36 @@ pub struct DataBench {
     pub read_vs_raw: f64,
     /// window pipeline bytes on disk per second / plain file read.
     pub read_vs_file: f64,
+    /// The world-model trainer's sequences/s on these shards (None without a config).
+    pub trainer_sequences_per_s: Option<f64>,
+    /// The reader's sequences/s at the trainer's spec and this shuffle buffer.
+    pub reader_sequences_per_s: Option<f64>,
+    /// `reader_sequences_per_s / trainer_sequences_per_s`; above 1 the reader keeps up.
+    pub headroom: Option<f64>,
+}
+
+/// The reader against the world-model trainer of `cfg` on the shards at `path`:
+/// `(reader sequences/s, trainer sequences/s)`.
+pub fn headroom(
+    path: &Path,
+    cfg: &crate::config::WorldModelConfig,
+    shuffle_capacity: usize,
+    batches: usize,
+) -> Result<(f64, f64), crate::world_model::WmError> {
+    let mut cfg = cfg.clone();
+    cfg.data.path = path.display().to_string();
+    cfg.data.shuffle = shuffle_capacity;
+    let spec = crate::world_model::sequences::Sequences::spec(&cfg)?;
+    let ds = Dataset::open(path, ReadOptions::default())?;
+    let t = Instant::now();
+    let mut count = 0u64;
+    for w in Shuffle::new(ds.windows(spec, None), shuffle_capacity, 0) {
+        std::hint::black_box(&w?);
+        count += 1;
+    }
+    let reader = count as f64 / t.elapsed().as_secs_f64();
+    let trainer = crate::bench::world_model::trainer_sequences_per_s(&cfg, batches, false)?;
+    Ok((reader, trainer))
 }
 
 /// Synthetic episodes: `n_envs` envs in lockstep for `steps` steps, episode
@@ -151,7 +183,7 @@ fn file_read(shards: &[PathBuf]) -> Result<u64, DataError> {
 
 /// Measure on `dir` (or on synthetic shards of `frames` frames written to `out`,
 /// kept, or to a temporary directory, removed, when `dir` is `None`), best of
-/// `rounds` alternating rounds.
+/// `rounds` alternating rounds; with `trainer`, the [`headroom`] too.
 pub fn data(
     dir: Option<&Path>,
     out: Option<&Path>,
@@ -159,6 +191,7 @@ pub fn data(
     spec: WindowSpec,
     shuffle_capacity: usize,
     rounds: usize,
+    trainer: Option<&crate::config::WorldModelConfig>,
 ) -> Result<DataBench, DataError> {
     let tmp = std::env::temp_dir().join(format!("dreampolicy-bench-data-{}", std::process::id()));
     let (path, synthetic) = match (dir, out) {
@@ -173,7 +206,17 @@ pub fn data(
         let n_envs = 64;
         write_synthetic(&path, 2, n_envs, (frames / (2 * n_envs)).max(1))?;
     }
-    let result = measure(&path, synthetic, spec, shuffle_capacity, rounds);
+    let mut result = measure(&path, synthetic, spec, shuffle_capacity, rounds);
+    if let (Ok(r), Some(cfg)) = (&mut result, trainer) {
+        match headroom(&path, cfg, shuffle_capacity, 2) {
+            Ok((reader, train)) => {
+                r.reader_sequences_per_s = Some(reader);
+                r.trainer_sequences_per_s = Some(train);
+                r.headroom = Some(reader / train);
+            }
+            Err(e) => result = Err(DataError::Invalid(format!("headroom: {e}"))),
+        }
+    }
     if synthetic && out.is_none() {
         let _ = std::fs::remove_dir_all(&tmp);
     }
@@ -237,5 +280,8 @@ fn measure(
         file_mb_per_s: file_bps / 1e6,
         read_vs_raw: win_fps / raw_fps,
         read_vs_file: (bytes as f64 / best_win) / file_bps,
+        trainer_sequences_per_s: None,
+        reader_sequences_per_s: None,
+        headroom: None,
     })
 }

@@ -199,3 +199,4 @@ pub fn env(
 }
 pub mod data;
 pub mod ppo;
+pub mod world_model;

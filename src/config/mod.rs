@@ -1,6 +1,11 @@
 //! Serde structs for the YAML experiment files, with `deny_unknown_fields`
 //! everywhere, `--set key.path=value` overrides, and validation that turns a bad
 //! value into one clear message.
+//!
+//! Two file kinds: [`ExperimentConfig`] (an env plus PPO: `configs/specialist/`,
+//! loaded by [`load`]) and [`WorldModelConfig`] (a dataset plus the diffusion
+//! world model: `configs/world_model/`, loaded by [`load_world_model`]). Each
+//! trainer loads its own kind; both share the override and parse machinery.
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -9,9 +14,14 @@ use serde::{Deserialize, Serialize};
 use crate::terrain::TerrainConfig;
 
 mod rl;
+mod world_model;
 pub use rl::{
     Activation, EvalConfig, HistoryConfig, HistoryKind, LrSchedule, PolicyConfig, PpoConfig,
     ScanEncoderConfig, TrainConfig,
+};
+pub use world_model::{
+    load_world_model, world_model_from_str, DataSection, DiffusionConfig, ModelConfig, SamplerKind,
+    SamplingConfig, ScheduleKind, WmTrainConfig, WorldModelConfig,
 };
 
 /// Everything that can go wrong reading a config.
@@ -522,11 +532,7 @@ impl Default for DomainRandConfig {
 
 /// Read `path`, apply `--set key.path=value` overrides, deserialize, validate.
 pub fn load(path: &Path, overrides: &[String]) -> Result<ExperimentConfig, ConfigError> {
-    let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    from_str(&text, &path.display().to_string(), overrides)
+    from_str(&read(path)?, &path.display().to_string(), overrides)
 }
 
 /// Like [`load`], from a string; `label` names it in messages.
@@ -535,6 +541,18 @@ pub fn from_str(
     label: &str,
     overrides: &[String],
 ) -> Result<ExperimentConfig, ConfigError> {
+    let cfg: ExperimentConfig = parse(text, label, overrides)?;
+    cfg.validate()?;
+    Ok(cfg)
+}
+
+/// Parse YAML `text` into `T` after applying `--set` overrides (no validation);
+/// shared by every config file kind.
+pub fn parse<T: serde::de::DeserializeOwned>(
+    text: &str,
+    label: &str,
+    overrides: &[String],
+) -> Result<T, ConfigError> {
     let mut value: serde_yaml::Value =
         serde_yaml::from_str(text).map_err(|e| ConfigError::Parse {
             path: label.to_string(),
@@ -543,12 +561,18 @@ pub fn from_str(
     for arg in overrides {
         apply_override(&mut value, arg)?;
     }
-    let cfg: ExperimentConfig = serde_yaml::from_value(value).map_err(|e| ConfigError::Parse {
+    serde_yaml::from_value(value).map_err(|e| ConfigError::Parse {
         path: label.to_string(),
         message: e.to_string(),
-    })?;
-    cfg.validate()?;
-    Ok(cfg)
+    })
+}
+
+/// Read a file's text for a loader.
+fn read(path: &Path) -> Result<String, ConfigError> {
+    std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 /// `a.b.c=value`: set a nested key (created if missing); the value is parsed as YAML.

@@ -214,6 +214,10 @@ pub struct EvalConfig {
     /// Different lanes (terrain seeds) the episodes of a non-flat evaluation
     /// are spread over.
     pub lanes: usize,
+    /// The terrain table lanes are drawn from, at `level` of its levels: by
+    /// default the paper's (whatever curriculum the policy trained on), so that
+    /// every policy is measured on the same lanes.
+    pub terrain: crate::terrain::TerrainConfig,
 }
 
 impl Default for EvalConfig {
@@ -225,6 +229,7 @@ impl Default for EvalConfig {
             level: 5,
             n_envs: 20,
             lanes: 10,
+            terrain: Default::default(),
         }
     }
 }
@@ -310,6 +315,19 @@ impl EvalConfig {
             return Err(ConfigError::Invalid(
                 "eval.lane_length, eval.time_limit_s and eval.n_envs must be positive".into(),
             ));
+        }
+        if self.lanes == 0 {
+            return Err(ConfigError::Invalid("eval.lanes must be at least 1".into()));
+        }
+        self.terrain
+            .validate()
+            .map_err(|e| ConfigError::Invalid(format!("eval.terrain: {e}")))?;
+        if self.level > self.terrain.max_level() {
+            return Err(ConfigError::Invalid(format!(
+                "eval.level {} is above eval.terrain's top level {}",
+                self.level,
+                self.terrain.max_level()
+            )));
         }
         Ok(())
     }

@@ -18,6 +18,10 @@ pub struct WindowSpec {
     pub history: usize,
     /// Frames after the anchor (`H >= 0`).
     pub horizon: usize,
+    /// Also keep the scandots of every `scan_every`-th row from the anchor on
+    /// (rows `K - 1 + j * scan_every` before the last row; 0 = the anchor's only):
+    /// the terrain of each chunk of a sequence of consecutive world-model windows.
+    pub scan_every: usize,
 }
 
 impl WindowSpec {
@@ -27,7 +31,27 @@ impl WindowSpec {
                 "a window needs a history of at least 1 frame".into(),
             ));
         }
-        Ok(WindowSpec { history, horizon })
+        Ok(WindowSpec {
+            history,
+            horizon,
+            scan_every: 0,
+        })
+    }
+
+    /// The same spec keeping the scandots of every `stride`-th row from the anchor
+    /// on (see [`WindowSpec::scan_every`]).
+    pub fn with_scans_every(self, stride: usize) -> WindowSpec {
+        WindowSpec {
+            scan_every: stride,
+            ..self
+        }
+    }
+
+    /// Rows whose scandots [`Window::scans`] holds, oldest first.
+    pub fn scan_rows(&self) -> impl Iterator<Item = usize> {
+        let (k, h, s) = (self.history, self.horizon, self.scan_every);
+        let n = if s == 0 { 0 } else { h.div_ceil(s) };
+        (0..n).map(move |j| k - 1 + j * s)
     }
 
     /// Frames in one window.
@@ -64,6 +88,9 @@ pub struct Window {
     pub actions: Vec<f32>,
     /// Scandots at the anchor.
     pub scan: Vec<f32>,
+    /// Scandots at the rows of [`WindowSpec::scan_rows`], concatenated (empty
+    /// unless `spec.scan_every > 0`).
+    pub scans: Vec<f32>,
     /// The last row is its episode's last frame (terminated or truncated).
     pub ends_episode: bool,
 }
@@ -105,6 +132,10 @@ impl Window {
             states,
             actions,
             scan: anchor.scan.clone(),
+            scans: spec
+                .scan_rows()
+                .flat_map(|r| frames[r].scan.iter().copied())
+                .collect(),
             ends_episode: last.done(),
         }
     }

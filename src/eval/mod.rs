@@ -91,8 +91,8 @@ pub fn eval_env_config(cfg: &ExperimentConfig, o: &EvalOptions) -> EnvConfig {
 }
 
 /// Evaluate the checkpoint's policy on `o.episodes` lanes: flat lanes are the
-/// plane; any other kind is walked on [`crate::terrain::TerrainMap::lane`]s of the
-/// checkpoint's terrain config at `eval.level`, `eval.lanes` different lanes
+/// plane; any other kind is walked on [`crate::terrain::TerrainMap::lane`]s of
+/// `eval.terrain` (the paper's table unless the config says otherwise) at `eval.level`, `eval.lanes` different lanes
 /// (seeds `o.seed`, `o.seed + 1`, ...) sharing the episodes evenly.
 pub fn evaluate(ck: &Checkpoint, o: &EvalOptions) -> Result<EvalReport, RlError> {
     if o.episodes == 0 {
@@ -106,10 +106,10 @@ pub fn evaluate(ck: &Checkpoint, o: &EvalOptions) -> Result<EvalReport, RlError>
         let mut env = VecEnv::new(&env_cfg)?;
         run_episodes(ck, &cfg, &mut env, o.episodes, length, &mut t)?;
     } else {
-        let map_cfg = &cfg.env.terrain.map;
+        let map_cfg = &cfg.eval.terrain;
         if cfg.eval.level > map_cfg.max_level() {
             return Err(RlError::Invalid(format!(
-                "eval.level {} is above the terrain config's top level {}",
+                "eval.level {} is above eval.terrain's top level {}",
                 cfg.eval.level,
                 map_cfg.max_level()
             )));

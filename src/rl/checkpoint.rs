@@ -1,8 +1,8 @@
 //! Checkpoints: one file of named tensors (networks, Adam moments, normalizer
 //! statistics) plus a JSON record (iteration, env-steps, wall time, the resolved
-//! config, every env's RNG and curriculum level). Written to a temporary name and
-//! renamed, so a kill at any moment leaves the previous checkpoint loadable.
-use std::collections::HashMap;
+//! config, every env's RNG and curriculum level), through the shared
+//! [`crate::checkpoint`] file format: written to a temporary name and renamed, so
+//! a kill at any moment leaves the previous checkpoint loadable.
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
@@ -13,6 +13,7 @@ use super::normalizer::RunningNorm;
 use super::optim::Adam;
 use super::task::{EnvSnapshot, TaskDims};
 use super::RlError;
+use crate::checkpoint::{save_named, NamedTensors};
 
 /// Bumped when the layout changes.
 pub const FORMAT: u32 = 1;
@@ -69,7 +70,7 @@ impl std::fmt::Display for Transfer {
 pub struct Checkpoint {
     pub path: PathBuf,
     pub meta: CheckpointMeta,
-    tensors: HashMap<String, Tensor>,
+    file: NamedTensors<CheckpointMeta>,
 }
 
 fn err(path: &Path, message: impl Into<String>) -> RlError {
@@ -95,10 +96,7 @@ pub fn save(
         named.push((format!("policy.{name}"), t.detach()));
     }
     if let Some(opt) = opt {
-        for (i, name) in opt.names().enumerate() {
-            named.push((format!("adam_m.{name}"), opt.m[i].shallow_clone()));
-            named.push((format!("adam_v.{name}"), opt.v[i].shallow_clone()));
-        }
+        named.extend(opt.named_moments());
     }
     named.push(("norm.obs".into(), f64_tensor(&agent.obs_norm.to_vec())));
     named.push((
@@ -106,55 +104,23 @@ pub fn save(
         f64_tensor(&agent.critic_norm.to_vec()),
     ));
     named.push(("norm.scan".into(), f64_tensor(&agent.scan_norm.to_vec())));
-    let json = serde_json::to_vec(meta).map_err(|e| err(path, e.to_string()))?;
-    named.push(("meta".into(), Tensor::from_slice(&json)));
-    if let Some(dir) = path.parent() {
-        std::fs::create_dir_all(dir).map_err(|source| RlError::Io {
-            path: dir.to_path_buf(),
-            source,
-        })?;
-    }
-    let tmp = path.with_extension("pt.tmp");
-    Tensor::save_multi(&named, &tmp)?;
-    // flush the data before the rename makes it the checkpoint
-    std::fs::File::open(&tmp)
-        .and_then(|f| f.sync_all())
-        .map_err(|source| RlError::Io {
-            path: tmp.clone(),
-            source,
-        })?;
-    std::fs::rename(&tmp, path).map_err(|source| RlError::Io {
-        path: path.to_path_buf(),
-        source,
-    })
+    Ok(save_named(path, named, meta)?)
 }
 
 impl Checkpoint {
     /// Read a checkpoint; a missing, truncated or foreign file is one clear error.
     pub fn read(path: &Path) -> Result<Checkpoint, RlError> {
-        if !path.is_file() {
-            return Err(err(path, "no such file"));
-        }
-        let list = Tensor::load_multi(path)
-            .map_err(|e| err(path, format!("not a readable checkpoint ({e})")))?;
-        let tensors: HashMap<String, Tensor> = list.into_iter().collect();
-        let meta_t = tensors
-            .get("meta")
-            .ok_or_else(|| err(path, "no 'meta' record: not a dreampolicy checkpoint"))?;
-        let bytes = Vec::<u8>::try_from(&meta_t.to_kind(Kind::Uint8))
-            .map_err(|e| err(path, e.to_string()))?;
-        let meta: CheckpointMeta = serde_json::from_slice(&bytes)
-            .map_err(|e| err(path, format!("bad meta record: {e}")))?;
-        if meta.format != FORMAT {
+        let file = NamedTensors::<CheckpointMeta>::read(path)?;
+        if file.meta.format != FORMAT {
             return Err(err(
                 path,
-                format!("format {} (this build reads {FORMAT})", meta.format),
+                format!("format {} (this build reads {FORMAT})", file.meta.format),
             ));
         }
         Ok(Checkpoint {
             path: path.to_path_buf(),
-            meta,
-            tensors,
+            meta: file.meta.clone(),
+            file,
         })
     }
 
@@ -168,27 +134,13 @@ impl Checkpoint {
     }
 
     fn tensor(&self, name: &str) -> Result<&Tensor, RlError> {
-        self.tensors
-            .get(name)
-            .ok_or_else(|| err(&self.path, format!("missing tensor '{name}'")))
+        Ok(self.file.tensor(name)?)
     }
 
     /// Copy the networks and normalizers into `agent` (same architecture).
     pub fn load_agent(&self, agent: &mut Agent) -> Result<(), RlError> {
-        for (name, mut var) in agent.policy.named_parameters() {
-            let src = self.tensor(&format!("policy.{name}"))?;
-            if src.size() != var.size() {
-                return Err(err(
-                    &self.path,
-                    format!(
-                        "tensor '{name}' has shape {:?}, the configured policy needs {:?}",
-                        src.size(),
-                        var.size()
-                    ),
-                ));
-            }
-            tch::no_grad(|| var.copy_(src));
-        }
+        self.file
+            .copy_into("policy", agent.policy.named_parameters())?;
         let d = agent.dims();
         for (key, dim, slot) in [
             ("norm.obs", d.obs, &mut agent.obs_norm),
@@ -233,7 +185,7 @@ impl Checkpoint {
         };
         let mut report = Transfer::default();
         for (name, mut var) in agent.policy.named_parameters() {
-            let Some(src) = self.tensors.get(&format!("policy.{name}")) else {
+            let Some(src) = self.file.tensor(&format!("policy.{name}")).ok() else {
                 if name.starts_with("scan_") && !src_scan {
                     report.fresh.push(name);
                     continue;
@@ -297,15 +249,7 @@ impl Checkpoint {
 
     /// Restore Adam's moments and step.
     pub fn load_optimizer(&self, opt: &mut Adam) -> Result<(), RlError> {
-        let names: Vec<String> = opt.names().map(String::from).collect();
-        for (i, name) in names.iter().enumerate() {
-            let m = self.tensor(&format!("adam_m.{name}"))?;
-            let v = self.tensor(&format!("adam_v.{name}"))?;
-            tch::no_grad(|| {
-                opt.m[i].copy_(m);
-                opt.v[i].copy_(v);
-            });
-        }
+        opt.load_moments(|name| self.file.tensor(name))?;
         opt.step = self.meta.adam_step;
         opt.lr = self.meta.learning_rate;
         Ok(())

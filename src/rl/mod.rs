@@ -45,3 +45,14 @@ pub enum RlError {
     #[error("{0}")]
     Invalid(String),
 }
+
+impl From<crate::checkpoint::CheckpointFileError> for RlError {
+    fn from(e: crate::checkpoint::CheckpointFileError) -> RlError {
+        use crate::checkpoint::CheckpointFileError as E;
+        match e {
+            E::Io { path, source } => RlError::Io { path, source },
+            E::Torch(t) => RlError::Torch(t),
+            E::Invalid { path, message } => RlError::Checkpoint { path, message },
+        }
+    }
+}

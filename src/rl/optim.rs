@@ -34,6 +34,33 @@ impl Adam {
         self.params.iter().map(|(n, _)| n.as_str())
     }
 
+    /// The moments as `adam_m.<name>` and `adam_v.<name>` (for a checkpoint).
+    pub fn named_moments(&self) -> Vec<(String, Tensor)> {
+        let mut out = Vec::with_capacity(2 * self.params.len());
+        for (i, (name, _)) in self.params.iter().enumerate() {
+            out.push((format!("adam_m.{name}"), self.m[i].shallow_clone()));
+            out.push((format!("adam_v.{name}"), self.v[i].shallow_clone()));
+        }
+        out
+    }
+
+    /// Copy saved moments in, looked up by their [`Adam::named_moments`] names.
+    pub fn load_moments<'a, E>(
+        &mut self,
+        mut get: impl FnMut(&str) -> Result<&'a Tensor, E>,
+    ) -> Result<(), E> {
+        for i in 0..self.params.len() {
+            let name = self.params[i].0.clone();
+            let m = get(&format!("adam_m.{name}"))?;
+            let v = get(&format!("adam_v.{name}"))?;
+            tch::no_grad(|| {
+                self.m[i].copy_(m);
+                self.v[i].copy_(v);
+            });
+        }
+        Ok(())
+    }
+
     pub fn zero_grad(&mut self) {
         for (_, p) in &mut self.params {
             let mut g = p.grad();

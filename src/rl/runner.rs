@@ -72,10 +72,7 @@ pub struct PhaseTimes {
     pub update: f64,
 }
 
-/// The latest resume checkpoint of a run directory.
-pub fn latest_checkpoint(run_dir: &Path) -> PathBuf {
-    run_dir.join("checkpoints").join("latest.pt")
-}
+pub use crate::run::latest_checkpoint;
 
 /// Episode statistics over a window of recent episodes.
 struct EpisodeStats {
@@ -482,11 +479,7 @@ pub fn learn<T: VecTask>(
             tr.checkpoint(&ckpt, start.elapsed().as_secs_f64())?;
             let ki = cfg.train.keep_interval;
             if ki > 0 && tr.iteration % ki == 0 {
-                let keep = run
-                    .path()
-                    .join("checkpoints")
-                    .join(format!("iter_{:06}.pt", tr.iteration));
-                std::fs::copy(&ckpt, &keep).map_err(|source| RlError::Io { path: keep, source })?;
+                crate::run::keep_checkpoint(run.path(), tr.iteration)?;
             }
             if let Err(e) = plot_run(run.path()) {
                 run.log(&format!("plots not drawn: {e}"))?;
