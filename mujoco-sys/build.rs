@@ -71,7 +71,11 @@ fn main() {
         .allowlist_type("mj.*")
         .allowlist_var("mjVERSION_HEADER")
         .allowlist_var("mju_user_.*")
-        .allowlist_var("mjNEQDATA|mjNDYN|mjNGAIN|mjNBIAS|mjNREF|mjNIMP|mjNSOLVER|mjMINVAL")
+        // the pairwise collision table (dreampolicy::sim::hfield_contact replaces two entries)
+        .allowlist_var("mjCOLLISIONFUNC")
+        .allowlist_var(
+            "mjNEQDATA|mjNDYN|mjNGAIN|mjNBIAS|mjNREF|mjNIMP|mjNSOLVER|mjMINVAL|mjMAXCONPAIR",
+        )
         // MJAPI variadic printing helpers and the UI/render API are not needed.
         .blocklist_function("mjr_.*|mjui_.*|mjv_.*")
         .default_enum_style(bindgen::EnumVariation::Consts)

@@ -188,3 +188,61 @@ fn envs_on_flat_columns_step_on_a_plane() {
     assert!(v.envs().iter().all(|e| !e.on_plane()));
     assert!(v.shared().scene.plane_models.is_empty());
 }
+
+/// G1s holding their default pose (zero actions) on an exactly flat heightfield:
+/// (1) how many fall in `steps` control steps, (2) the largest tilt (1 - n_z)
+/// of a terrain contact normal over the first 25 steps.
+fn stand_on_flat_heightfield(hfield_contacts: &str, steps: usize) -> (usize, f64) {
+    let contacts = format!("env.sim.hfield_contacts={hfield_contacts}");
+    let c = common::load_config(
+        "specialist/uneven.yaml",
+        &[
+            "env.domain_rand.enabled=false",
+            "env.observation.add_noise=false",
+            "env.n_envs=24",
+            "env.terrain.map.kinds={flat: 1.0}",
+            "env.terrain.flat_on_plane=false",
+            "env.terrain.map.min_roughness=0.0",
+            "env.terrain.map.base_roughness=0.0",
+            &contacts,
+        ],
+    );
+    let mut v = VecEnv::new(&c.env).unwrap();
+    assert!(v.envs().iter().all(|e| !e.on_plane()));
+    let zeros = vec![0.0f32; 24 * NUM_JOINTS];
+    let (mut falls, mut tilt) = (0, 0.0f64);
+    for step in 0..steps {
+        falls += v.step(&zeros).episodes_done;
+        if step < 25 {
+            for env in v.envs() {
+                let m = env.data().model();
+                let terrain = m.id(dreampolicy::sim::ObjType::Geom, "terrain").unwrap() as i32;
+                for con in env.data().contacts() {
+                    let (g1, g2) = dreampolicy::sim::contact_geoms(con);
+                    if g1 == terrain || g2 == terrain {
+                        tilt = tilt.max(1.0 - con.frame[2].abs());
+                    }
+                }
+            }
+        }
+    }
+    (falls, tilt)
+}
+
+#[test]
+fn g1_stands_on_a_flat_heightfield_as_on_a_plane() {
+    // surface contacts (the default): normals straight up, nobody falls in 6 s,
+    // as on the plane
+    let (falls, tilt) = stand_on_flat_heightfield("surface", 300);
+    assert!(
+        tilt < 1e-9,
+        "a terrain contact normal tilted: 1 - n_z = {tilt}"
+    );
+    assert_eq!(falls, 0, "G1s fell standing still on a flat heightfield");
+    // MuJoCo's prisms (the cause): their side faces tilt contact normals
+    let (_, tilt) = stand_on_flat_heightfield("prisms", 25);
+    assert!(
+        tilt > 0.05,
+        "prism contacts on a flat heightfield: 1 - n_z = {tilt}"
+    );
+}

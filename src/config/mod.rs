@@ -150,6 +150,20 @@ pub struct SimConfig {
     pub iterations: usize,
     /// Line-search iterations (`<option ls_iterations>`; MuJoCo's default 50).
     pub ls_iterations: usize,
+    /// How robot spheres and capsules touch a heightfield terrain: `surface`
+    /// (the terrain's top surface only, contacts along the triangles' normals:
+    /// `sim::hfield_contact`) or `prisms` (MuJoCo's own prism-by-prism test,
+    /// whose internal side faces tilt contact normals: a G1 standing still on a
+    /// flat heightfield slides and falls).
+    pub hfield_contacts: HfieldContacts,
+}
+
+/// Heightfield collision model of the terrain geom.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HfieldContacts {
+    Surface,
+    Prisms,
 }
 
 /// Robot-ground collision set of the scene.
@@ -195,6 +209,7 @@ impl Default for SimConfig {
             collision: CollisionMode::Full,
             iterations: 100,
             ls_iterations: 50,
+            hfield_contacts: HfieldContacts::Surface,
         }
     }
 }

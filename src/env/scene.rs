@@ -15,8 +15,9 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::EnvError;
-use crate::config::{EnvConfig, TerrainMode};
+use crate::config::{EnvConfig, HfieldContacts, TerrainMode};
 use crate::robot::{self, G1};
+use crate::sim::hfield_contact::SURFACE_CONTACTS;
 use crate::sim::{HeightField, Model, ObjType};
 use crate::terrain::{TerrainKind, TerrainMap};
 
@@ -169,6 +170,11 @@ pub fn scene_xml(cfg: &EnvConfig, terrain: Option<&TerrainMap>) -> String {
         ),
         Some(map) => {
             let (size, pos) = (map.hfield_size(), map.hfield_pos());
+            // `user` = SURFACE_CONTACTS: our surface contacts (sim::hfield_contact)
+            let user = match cfg.sim.hfield_contacts {
+                HfieldContacts::Surface => format!(r#" user="{}""#, SURFACE_CONTACTS),
+                HfieldContacts::Prisms => String::new(),
+            };
             let (nrow, ncol) = map.hfield_shape();
             (
                 format!(
@@ -176,7 +182,7 @@ pub fn scene_xml(cfg: &EnvConfig, terrain: Option<&TerrainMap>) -> String {
                     size[0], size[1], size[2], size[3]
                 ),
                 format!(
-                    r#"<geom name="terrain" type="hfield" hfield="terrain" pos="{} {} {}" contype="1" conaffinity="1" condim="3"/>"#,
+                    r#"<geom name="terrain" type="hfield" hfield="terrain" pos="{} {} {}" contype="1" conaffinity="1" condim="3"{user}/>"#,
                     pos[0], pos[1], pos[2]
                 ),
             )

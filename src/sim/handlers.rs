@@ -10,6 +10,9 @@
 //! * a warning handler that counts every warning and keeps the last message.
 //!   Per-`Data` warnings (bad qacc, contact overflow, ...) are also counted by
 //!   [`super::Data`] from `mjData.warning`.
+//!
+//! The same `Once` installs the heightfield surface contacts
+//! ([`super::hfield_contact`]) into MuJoCo's collision table.
 use std::ffi::{c_char, CStr};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Mutex, Once};
@@ -62,6 +65,7 @@ pub fn install() {
             mujoco_sys::mju_user_error = Some(on_error);
             mujoco_sys::mju_user_warning = Some(on_warning);
         }
+        super::hfield_contact::install();
     });
 }
 

@@ -7,6 +7,7 @@ mod data;
 mod error;
 pub mod handlers;
 mod hfield;
+pub mod hfield_contact;
 mod model;
 
 pub use data::{contact_geoms, Contact, Data, DEFAULT_MAX_QVEL, NUM_WARNINGS};
