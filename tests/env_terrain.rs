@@ -198,6 +198,7 @@ fn stand_on_flat_heightfield(hfield_contacts: &str, steps: usize) -> (usize, f64
         "specialist/uneven.yaml",
         &[
             "env.domain_rand.enabled=false",
+            "env.sim.integrator=implicit",
             "env.observation.add_noise=false",
             "env.n_envs=24",
             "env.terrain.map.kinds={flat: 1.0}",
