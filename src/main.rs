@@ -915,6 +915,10 @@ fn eval_world_model(a: EvalWmArgs) -> Result<()> {
         t.push_str(&format!("\n| {} | {m:.4} | {b:.4} | {j} |", i + 1));
     }
     println!("{t}");
+    println!(
+        "(baseline: the dataset's mean state scores {:.4})",
+        r.mean_state_rmse
+    );
     let opt = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.4}"));
     println!("\nguidance (default sampler):\n| omega | RMSE | RMSE at H | joint_pos (rad) | real vs shuffled scandots |\n|---|---|---|---|---|");
     let mut gs: Vec<_> = r.guidance.values().collect();

@@ -293,12 +293,11 @@ pub fn plot_series(out_png: &Path, title: &str, panels: &[SeriesPanel]) -> Resul
     draw_grid(out_png, title, data)
 }
 
+/// A panel with its x values and its lines' y values.
+type PanelData<'a> = (&'a Panel, &'a [f64], Vec<&'a [f64]>);
+
 /// Draw `(panel, x, ys)` triples in a grid under a title band.
-fn draw_grid(
-    out_png: &Path,
-    title: &str,
-    data: Vec<(&Panel, &[f64], Vec<&[f64]>)>,
-) -> Result<(), PlotError> {
+fn draw_grid(out_png: &Path, title: &str, data: Vec<PanelData>) -> Result<(), PlotError> {
     register_font()?;
 
     let (w, h) = image_size(data.len());

@@ -9,6 +9,7 @@
 //! dataset still fits. [`ValidationSet::pick`] draws windows (a history of `K`
 //! rows and `future` rows after the anchor) stratified by terrain kind and
 //! uniform over the eligible anchors of each kind, without replacement.
+use std::collections::hash_map::Entry;
 use std::collections::{BTreeMap, HashMap};
 
 use rand::SeedableRng;
@@ -50,6 +51,9 @@ pub struct Pick {
     pub anchor: usize,
 }
 
+/// `(segment, first anchor row, anchors)` of one segment.
+type Span = (usize, usize, usize);
+
 /// The validation episodes of a dataset.
 pub struct ValidationSet {
     pub dims: Dims,
@@ -88,26 +92,24 @@ impl ValidationSet {
                 }
             }
             last_step.insert(key, f.step);
-            if !open.contains_key(&key) {
-                let used = per_kind.entry(f.terrain).or_default();
-                if *used >= max_frames_per_kind {
-                    if !capped.contains(&f.terrain) {
-                        capped.push(f.terrain);
+            let seg = match open.entry(key) {
+                Entry::Occupied(e) => e.into_mut(),
+                Entry::Vacant(e) => {
+                    if per_kind.get(&f.terrain).copied().unwrap_or(0) >= max_frames_per_kind {
+                        if !capped.contains(&f.terrain) {
+                            capped.push(f.terrain);
+                        }
+                        continue;
                     }
-                    continue;
-                }
-                open.insert(
-                    key,
-                    Segment {
+                    e.insert(Segment {
                         episode: f.episode,
                         kind: f.terrain,
                         first_step: f.step,
                         states: Vec::new(),
                         scans: Vec::new(),
-                    },
-                );
-            }
-            let seg = open.get_mut(&key).expect("inserted above");
+                    })
+                }
+            };
             seg.states.extend_from_slice(&f.state);
             seg.scans.extend_from_slice(&f.scan);
             *per_kind.entry(f.terrain).or_default() += 1;
@@ -162,10 +164,10 @@ impl ValidationSet {
     pub fn pick(&self, history: usize, future: usize, n: usize, seed: u64) -> Vec<Pick> {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let need = history + future;
-        // (kind, [(segment, first anchor, anchors)])
-        let mut by_kind: Vec<(TerrainKind, Vec<(usize, usize, usize)>)> = Vec::new();
+        // per kind: (segment, first anchor, anchors) of its eligible segments
+        let mut by_kind: Vec<(TerrainKind, Vec<Span>)> = Vec::new();
         for kind in self.kinds() {
-            let spans: Vec<(usize, usize, usize)> = self
+            let spans: Vec<Span> = self
                 .segments
                 .iter()
                 .enumerate()

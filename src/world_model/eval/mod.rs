@@ -10,8 +10,9 @@
 //! dataset's units, e.g. joint positions in rad).
 //!
 //! * **One call** (the config's `sampling`): `horizon_rmse[h - 1]` for `h = 1..=H`,
-//!   the same per named state block in raw units, and `hold_rmse` (the anchor
-//!   state held for `H` steps) as a baseline.
+//!   the same per named state block in raw units, and two baselines:
+//!   `hold_rmse` (the anchor state held for `H` steps) and `mean_state_rmse`
+//!   (the dataset's mean state).
 //! * **Guidance** `omega in {0, 1, 5}` (the config's sampler): one-call error,
 //!   and `terrain_distance`: RMS between the predictions with the real and the
 //!   shuffled scandots under the same noise (exactly 0 for `omega = 0`, which
@@ -213,6 +214,8 @@ pub struct WmEvalReport {
     pub hold_rmse: Vec<f64>,
     /// The same per state block (raw units).
     pub hold_rmse_raw: BTreeMap<String, Vec<f64>>,
+    /// Baseline: the dataset's mean state at every step (normalized, over all `H`).
+    pub mean_state_rmse: f64,
     /// Keyed by `omega` (`"0"`, `"1"`, `"5"`).
     pub guidance: BTreeMap<String, GuidanceScore>,
     /// Keyed `ddpm`, `ddim5`, `ddim10`, `ddim20`.
@@ -552,6 +555,7 @@ pub fn evaluate(checkpoint: &Path, opts: &WmEvalOptions) -> Result<WmEvalReport,
         horizon_rmse_raw,
         hold_rmse,
         hold_rmse_raw,
+        mean_state_rmse: rms(&real_n),
         guidance,
         samplers,
         terrain_sensitivity,
