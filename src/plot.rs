@@ -1,7 +1,7 @@
 //! PNG training curves from a run's `metrics.csv`: the CSV reader
 //! ([`MetricsTable`]) and [`plot_csv`], which draws a grid of line-chart panels
 //! (one [`Panel`] each: named y columns against an x column, with a legend) into one
-//! PNG with a title.
+//! PNG with a title; [`plot_series`] draws the same grid from in-memory lines.
 //!
 //! The CSV is what [`crate::run`] writes: a header row of column names, then rows of
 //! numbers (`NaN`, `inf` and empty fields are allowed; non-finite points are left
@@ -252,11 +252,55 @@ pub fn plot_csv(
             p.ys.iter()
                 .map(|y| table.column(y))
                 .collect::<Result<Vec<_>, _>>()?;
-        data.push((x, ys));
+        data.push((p, x, ys));
     }
+    draw_grid(out_png, title, data)
+}
+
+/// One subplot of in-memory lines: `lines[i].1` against `x` (NaN breaks a line).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SeriesPanel {
+    pub title: String,
+    /// The x axis' label.
+    pub x_label: String,
+    pub x: Vec<f64>,
+    /// `(legend name, values)`, each as long as `x`.
+    pub lines: Vec<(String, Vec<f64>)>,
+}
+
+/// Plot in-memory [`SeriesPanel`]s into `out_png` in the same grid and style as
+/// [`plot_csv`].
+pub fn plot_series(out_png: &Path, title: &str, panels: &[SeriesPanel]) -> Result<(), PlotError> {
+    if panels.is_empty() {
+        return Err(PlotError::NoPanels);
+    }
+    let heads: Vec<Panel> = panels
+        .iter()
+        .map(|p| Panel {
+            title: p.title.clone(),
+            x: p.x_label.clone(),
+            ys: p.lines.iter().map(|l| l.0.clone()).collect(),
+        })
+        .collect();
+    let data = heads
+        .iter()
+        .zip(panels)
+        .map(|(h, p)| {
+            let ys: Vec<&[f64]> = p.lines.iter().map(|l| l.1.as_slice()).collect();
+            (h, p.x.as_slice(), ys)
+        })
+        .collect();
+    draw_grid(out_png, title, data)
+}
+
+/// A panel with its x values and its lines' y values.
+type PanelData<'a> = (&'a Panel, &'a [f64], Vec<&'a [f64]>);
+
+/// Draw `(panel, x, ys)` triples in a grid under a title band.
+fn draw_grid(out_png: &Path, title: &str, data: Vec<PanelData>) -> Result<(), PlotError> {
     register_font()?;
 
-    let (w, h) = image_size(panels.len());
+    let (w, h) = image_size(data.len());
     let mut rgb = vec![0u8; w as usize * h as usize * 3];
     let draw_err = |e: &dyn std::fmt::Display| PlotError::Draw {
         path: out_png.into(),
@@ -268,9 +312,8 @@ pub fn plot_csv(
         let (top, body) = root.split_vertically(TITLE_HEIGHT);
         top.titled(title, ("sans-serif", 26))
             .map_err(|e| draw_err(&e))?;
-        let (cols, rows) = grid(panels.len());
-        for ((panel, (x, ys)), area) in panels.iter().zip(data).zip(body.split_evenly((rows, cols)))
-        {
+        let (cols, rows) = grid(data.len());
+        for ((panel, x, ys), area) in data.into_iter().zip(body.split_evenly((rows, cols))) {
             draw_panel(&area, panel, x, &ys).map_err(|e| draw_err(&e))?;
         }
         root.present().map_err(|e| draw_err(&e))?;

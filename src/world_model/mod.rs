@@ -19,10 +19,13 @@
 //! * [`checkpoint`]: the checkpoint record and reader (shared file format).
 //! * [`trainer`]: the scheduled training loop (Algorithm 2), validation,
 //!   checkpoints and the run directory.
+//! * [`eval`]: `dreampolicy eval world-model`: one-call error per horizon step,
+//!   autoregressive drift, guidance, terrain sensitivity, samplers, and a PNG.
 use std::path::PathBuf;
 
 pub mod checkpoint;
 pub mod denoiser;
+pub mod eval;
 pub mod rollout;
 pub mod sampler;
 pub mod schedule;
@@ -31,6 +34,7 @@ pub mod trainer;
 
 pub use checkpoint::WmCheckpoint;
 pub use denoiser::{Denoiser, Normalizer};
+pub use eval::{evaluate, WmEvalOptions, WmEvalReport};
 pub use rollout::{FixedTerrain, TerrainSource, WorldModel};
 pub use sampler::{sample, Noise};
 pub use schedule::{rollout_probability, NoiseSchedule};
@@ -57,6 +61,8 @@ pub enum WmError {
     },
     #[error("training diverged: {0}")]
     NonFinite(String),
+    #[error(transparent)]
+    Plot(#[from] crate::plot::PlotError),
     #[error("{0}")]
     Invalid(String),
 }

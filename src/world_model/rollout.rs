@@ -74,7 +74,11 @@ impl WorldModel {
 
     /// The EMA weights of a world-model checkpoint.
     pub fn load(path: &Path, device: Device) -> Result<WorldModel, WmError> {
-        let ck = WmCheckpoint::read(path)?;
+        WorldModel::from_checkpoint(&WmCheckpoint::read(path)?, device)
+    }
+
+    /// The EMA weights of a checkpoint already read.
+    pub fn from_checkpoint(ck: &WmCheckpoint, device: Device) -> Result<WorldModel, WmError> {
         let cfg = ck.config()?;
         let d = ck.meta().dims;
         let net = Denoiser::new(&cfg.model, d.state, d.scan, device);
