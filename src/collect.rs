@@ -80,6 +80,11 @@ pub struct CollectConfig {
     /// Keep the checkpoint's domain randomization (pushes, friction, mass,
     /// latency); false collects on the nominal model.
     pub domain_rand: bool,
+    /// Observation noise on the recorded states (and so on what the policy
+    /// sees). Off by default: the world model learns the dynamics of clean
+    /// states; with the training noise on, holding the last state is already
+    /// ~1 std off after one step.
+    pub observation_noise: bool,
     /// Envs start at levels uniform in `0..=max_level` (clamped to the map's top;
     /// `None` = every level).
     pub max_level: Option<usize>,
@@ -104,6 +109,7 @@ impl Default for CollectConfig {
             episode_length_s: None,
             deterministic: false,
             domain_rand: true,
+            observation_noise: false,
             max_level: None,
             threads: 2,
             torch_threads: 1,
@@ -360,6 +366,7 @@ fn collect_shard(
         env_cfg.episode_length_s = t;
     }
     env_cfg.domain_rand.enabled &= cfg.domain_rand;
+    env_cfg.observation.add_noise &= cfg.observation_noise;
     env_cfg.terrain.curriculum = false;
     if env_cfg.terrain.mode == TerrainMode::Map {
         let top = env_cfg.terrain.map.max_level();
