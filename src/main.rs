@@ -574,31 +574,45 @@ fn run(cli: Cli) -> Result<()> {
 }
 
 fn train_specialist(args: TrainArgs) -> Result<()> {
-    use dreampolicy::rl::runner;
+    let (cfg, run_path) =
+        train_setup(&args, &["env.threads", "train.torch_threads"], config::load)?;
+    let s = dreampolicy::rl::runner::train(&cfg, &run_path, args.resume.is_some(), args.quiet)
+        .with_context(|| format!("training in {}", run_path.display()))?;
+    println!("{}", serde_json::to_string(&s)?);
+    Ok(())
+}
+
+/// The config and run directory of a `train` subcommand: `--resume DIR`
+/// reloads `DIR/config.yaml`, else `--config` goes into a fresh run directory;
+/// `--seed` sets `train.seed` and `--threads` every key of `thread_keys`
+/// (appended after the `--set` overrides, as before).
+fn train_setup<C, E>(
+    args: &TrainArgs,
+    thread_keys: &[&str],
+    load: impl Fn(&std::path::Path, &[String]) -> std::result::Result<C, E>,
+) -> Result<(C, PathBuf)>
+where
+    E: std::error::Error + Send + Sync + 'static,
+{
     let mut sets = args.sets.clone();
     if let Some(seed) = args.seed {
         sets.push(format!("train.seed={seed}"));
     }
     if let Some(t) = args.threads {
-        sets.push(format!("env.threads={t}"));
-        sets.push(format!("train.torch_threads={t}"));
+        sets.extend(thread_keys.iter().map(|k| format!("{k}={t}")));
     }
-    let (cfg, run_path) = match &args.resume {
+    match &args.resume {
         Some(dir) => {
-            let cfg = config::load(&dir.join("config.yaml"), &sets)
+            let cfg = load(&dir.join("config.yaml"), &sets)
                 .with_context(|| format!("resuming {}", dir.display()))?;
-            (cfg, dir.clone())
+            Ok((cfg, dir.clone()))
         }
         None => {
             let path = args.config.as_ref().context("--config is required")?;
-            let cfg = config::load(path, &sets)?;
-            (cfg, fresh_run_dir(path, args.out.as_ref())?)
+            let cfg = load(path, &sets)?;
+            Ok((cfg, fresh_run_dir(path, args.out.as_ref())?))
         }
-    };
-    let s = runner::train(&cfg, &run_path, args.resume.is_some(), args.quiet)
-        .with_context(|| format!("training in {}", run_path.display()))?;
-    println!("{}", serde_json::to_string(&s)?);
-    Ok(())
+    }
 }
 
 /// The run directory of a fresh run: `--out`, or `runs/<config name>`; refused
@@ -621,27 +635,8 @@ fn fresh_run_dir(config: &std::path::Path, out: Option<&PathBuf>) -> Result<Path
 }
 
 fn train_world_model(args: TrainArgs) -> Result<()> {
-    use dreampolicy::world_model;
-    let mut sets = args.sets.clone();
-    if let Some(seed) = args.seed {
-        sets.push(format!("train.seed={seed}"));
-    }
-    if let Some(t) = args.threads {
-        sets.push(format!("train.torch_threads={t}"));
-    }
-    let (cfg, run_path) = match &args.resume {
-        Some(dir) => {
-            let cfg = config::load_world_model(&dir.join("config.yaml"), &sets)
-                .with_context(|| format!("resuming {}", dir.display()))?;
-            (cfg, dir.clone())
-        }
-        None => {
-            let path = args.config.as_ref().context("--config is required")?;
-            let cfg = config::load_world_model(path, &sets)?;
-            (cfg, fresh_run_dir(path, args.out.as_ref())?)
-        }
-    };
-    let s = world_model::train(&cfg, &run_path, args.resume.is_some(), args.quiet)
+    let (cfg, run_path) = train_setup(&args, &["train.torch_threads"], config::load_world_model)?;
+    let s = dreampolicy::world_model::train(&cfg, &run_path, args.resume.is_some(), args.quiet)
         .with_context(|| format!("training the world model in {}", run_path.display()))?;
     println!("{}", serde_json::to_string(&s)?);
     Ok(())

@@ -192,3 +192,25 @@ impl Progress {
         }
     }
 }
+
+/// Draw `panels` of `run_dir/metrics.csv` into `run_dir/plots/training.png`
+/// (the directory is created) and return the PNG's path: what every trainer's
+/// `plot_run` does with its own panels.
+pub fn plot_training(
+    run_dir: &Path,
+    panels: &[crate::plot::Panel],
+) -> Result<PathBuf, crate::plot::PlotError> {
+    let dir = run_dir.join("plots");
+    std::fs::create_dir_all(&dir).map_err(|source| crate::plot::PlotError::Io {
+        path: dir.clone(),
+        source,
+    })?;
+    let out = dir.join("training.png");
+    crate::plot::plot_csv(
+        &run_dir.join("metrics.csv"),
+        &out,
+        &run_dir.display().to_string(),
+        panels,
+    )?;
+    Ok(out)
+}

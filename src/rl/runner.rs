@@ -516,8 +516,7 @@ pub fn learn<T: VecTask>(
 
 /// Draw `plots/training.png` from the run's `metrics.csv`.
 pub fn plot_run(run_dir: &Path) -> Result<PathBuf, crate::plot::PlotError> {
-    use crate::plot::{plot_csv, Panel};
-    let out = run_dir.join("plots").join("training.png");
+    use crate::plot::Panel;
     let x = "env_steps";
     let panels = [
         Panel::new("episode return (last 100)", x, &["mean_return"]),
@@ -537,17 +536,7 @@ pub fn plot_run(run_dir: &Path) -> Result<PathBuf, crate::plot::PlotError> {
             &["time_physics_s", "time_inference_s", "time_update_s"],
         ),
     ];
-    std::fs::create_dir_all(run_dir.join("plots")).map_err(|e| crate::plot::PlotError::Io {
-        path: run_dir.join("plots"),
-        source: e,
-    })?;
-    plot_csv(
-        &run_dir.join("metrics.csv"),
-        &out,
-        &run_dir.display().to_string(),
-        &panels,
-    )?;
-    Ok(out)
+    crate::run::plot_training(run_dir, &panels)
 }
 
 /// Metrics columns of a task: [`COLUMNS`] then `rew_<term>`.

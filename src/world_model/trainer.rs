@@ -552,8 +552,7 @@ pub fn learn(
 
 /// Draw `plots/training.png` from the run's `metrics.csv`.
 pub fn plot_run(run_dir: &Path) -> Result<PathBuf, crate::plot::PlotError> {
-    use crate::plot::{plot_csv, Panel};
-    let out = run_dir.join("plots").join("training.png");
+    use crate::plot::Panel;
     let x = "iteration";
     let panels = [
         Panel::new("x0 loss (normalized)", x, &["loss", "val_loss"]),
@@ -571,17 +570,7 @@ pub fn plot_run(run_dir: &Path) -> Result<PathBuf, crate::plot::PlotError> {
             &["time_data_s", "time_train_s", "time_rollout_s"],
         ),
     ];
-    std::fs::create_dir_all(run_dir.join("plots")).map_err(|e| crate::plot::PlotError::Io {
-        path: run_dir.join("plots"),
-        source: e,
-    })?;
-    plot_csv(
-        &run_dir.join("metrics.csv"),
-        &out,
-        &run_dir.display().to_string(),
-        &panels,
-    )?;
-    Ok(out)
+    crate::run::plot_training(run_dir, &panels)
 }
 
 /// Train the config in `run_dir` (fresh, or resumed from the run's latest
