@@ -111,6 +111,10 @@ enum Command {
         /// default solver) instead of the checkpoint's training scene.
         #[arg(long)]
         full_collision: bool,
+        /// Lane difficulty level (0 = easiest) instead of the config's
+        /// `eval.level`.
+        #[arg(long)]
+        level: Option<usize>,
         #[arg(long, default_value_t = 0)]
         seed: u64,
         #[arg(long, default_value_t = 2)]
@@ -423,6 +427,7 @@ fn run(cli: Cli) -> Result<()> {
             terrain,
             episodes,
             full_collision,
+            level,
             seed,
             threads,
             out,
@@ -433,6 +438,7 @@ fn run(cli: Cli) -> Result<()> {
             terrains: terrain,
             episodes,
             full_collision,
+            level,
             seed,
             threads,
             out,
@@ -742,6 +748,7 @@ struct EvalArgs {
     terrains: Vec<String>,
     episodes: usize,
     full_collision: bool,
+    level: Option<usize>,
     seed: u64,
     threads: usize,
     out: Option<PathBuf>,
@@ -789,6 +796,7 @@ fn eval_cmd(a: EvalArgs) -> Result<()> {
                 full_collision: a.full_collision,
                 seed: a.seed,
                 threads: a.threads.max(1),
+                level: a.level,
             };
             let r = eval::evaluate(ck, &opts)
                 .with_context(|| format!("evaluating {name} on {}", kind.name()))?;

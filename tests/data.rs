@@ -328,6 +328,21 @@ fn split_is_by_episode_and_deterministic() {
     );
     let frac = val.len() as f64 / all.len() as f64;
     assert!((0.2..0.4).contains(&frac), "validation fraction {frac}");
+    // the split skips the other side's frames undecoded: what it gives out is
+    // exactly the written frames of its episodes, in order
+    let got: Vec<_> = ds
+        .split_frames(Some((spec, Split::Validation)))
+        .map(|x| x.unwrap().1)
+        .collect();
+    let want: Vec<_> = frames
+        .iter()
+        .filter(|f| spec.of(f.episode) == Split::Validation)
+        .cloned()
+        .collect();
+    assert!(
+        got == want,
+        "validation frames differ from the written ones"
+    );
     // the same spec gives the same split; the split is a function of the id alone
     assert_eq!(side(spec, Split::Validation).0, val);
     for id in &val {

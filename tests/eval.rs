@@ -27,6 +27,7 @@ fn opts(episodes: usize) -> EvalOptions {
         full_collision: true,
         seed: 3,
         threads: 1,
+        level: None,
     }
 }
 
@@ -213,6 +214,26 @@ fn terrain_lanes_are_walked_and_episodes_spread_over_lanes() {
     assert_eq!((r.episodes, r.success_rate), (5, 1.0));
     assert_eq!(r.level, Some(5));
     assert_eq!(r.terrain, "stair");
+    // `--level` overrides eval.level; a level the table lacks is refused
+    let r = evaluate(
+        &ck,
+        &EvalOptions {
+            level: Some(0),
+            ..o.clone()
+        },
+    )
+    .unwrap();
+    assert_eq!(r.level, Some(0));
+    let e = evaluate(
+        &ck,
+        &EvalOptions {
+            level: Some(10),
+            ..o.clone()
+        },
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("level 10") && e.contains("top level 9"), "{e}");
 
     // 50 m in 0.5 s on uneven ground: every episode is counted once, none succeeds
     let dir2 = Scratch::new("eval-lanes2");

@@ -27,7 +27,7 @@ pub mod writer;
 
 pub use frame::{Dims, Frame};
 pub use meta::{DatasetInfo, ShardMeta};
-pub use reader::{DataWarning, Dataset, OnTruncated, ReadOptions, ShardReader};
+pub use reader::{DataWarning, Dataset, EpisodeFilter, OnTruncated, ReadOptions, ShardReader};
 pub use sample::{Shuffle, Split, SplitSpec};
 pub use stats::{DatasetStats, DimStats};
 pub use window::{Window, WindowSpec, Windows};

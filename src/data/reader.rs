@@ -70,6 +70,11 @@ enum Event {
     Frame(Result<Frame, String>),
 }
 
+/// Which episodes a reader gives out; the others are skipped before their
+/// frames are decoded (a validation split reads a tenth of the frames without
+/// building the other nine tenths).
+pub type EpisodeFilter = Arc<dyn Fn(u64) -> bool + Send + Sync>;
+
 /// The frames of one shard, in file order.
 pub struct ShardReader {
     path: PathBuf,
@@ -80,6 +85,7 @@ pub struct ShardReader {
     channel: Option<u16>,
     frames: u64,
     finished: bool,
+    filter: Option<EpisodeFilter>,
 }
 
 impl ShardReader {
@@ -99,6 +105,7 @@ impl ShardReader {
             channel: None,
             frames: 0,
             finished: false,
+            filter: None,
         };
         let not_shard = |why: &str| DataError::NotAShard {
             path: path.to_path_buf(),
@@ -132,6 +139,13 @@ impl ShardReader {
         }
         r.meta = meta;
         Ok(r)
+    }
+
+    /// Give out only the frames of episodes `keep` accepts (by episode id, read
+    /// from the message before anything else is decoded).
+    pub fn with_filter(mut self, keep: EpisodeFilter) -> ShardReader {
+        self.filter = Some(keep);
+        self
     }
 
     pub fn meta(&self) -> &ShardMeta {
@@ -184,6 +198,14 @@ impl ShardReader {
                         let channel = u16::from_le_bytes([data[0], data[1]]);
                         if Some(channel) != self.channel {
                             continue;
+                        }
+                        let payload = &data[MESSAGE_HEADER_BYTES..];
+                        if let (Some(keep), Some(id)) = (&self.filter, payload.get(..8)) {
+                            let mut b = [0u8; 8];
+                            b.copy_from_slice(id);
+                            if !keep(u64::from_le_bytes(b)) {
+                                continue;
+                            }
                         }
                         let frame = Frame::decode(
                             &data[MESSAGE_HEADER_BYTES..],
@@ -355,6 +377,16 @@ impl Dataset {
             opts: self.opts,
             warnings: self.warnings.clone(),
             failed: false,
+            filter: None,
+        }
+    }
+
+    /// The frames of the episodes `keep` accepts; the others are skipped
+    /// undecoded.
+    pub fn frames_where(&self, keep: EpisodeFilter) -> Frames {
+        Frames {
+            filter: Some(keep),
+            ..self.frames()
         }
     }
 }
@@ -367,6 +399,7 @@ pub struct Frames {
     opts: ReadOptions,
     warnings: Arc<Mutex<Vec<DataWarning>>>,
     failed: bool,
+    filter: Option<EpisodeFilter>,
 }
 
 impl Frames {
@@ -412,7 +445,13 @@ impl Iterator for Frames {
             let i = self.next;
             self.next += 1;
             match ShardReader::open(&self.shards[i], self.opts.expected) {
-                Ok(r) => self.current = Some((i, r)),
+                Ok(r) => {
+                    let r = match &self.filter {
+                        Some(keep) => r.with_filter(keep.clone()),
+                        None => r,
+                    };
+                    self.current = Some((i, r))
+                }
                 Err(e) => {
                     if let Some(e) = self.absorb(e) {
                         self.failed = true;

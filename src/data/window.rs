@@ -4,6 +4,7 @@
 //! windows, one per anchor, in stream order. A step gap inside an episode (frames
 //! lost to a truncation) restarts its window buffer; so does a new shard.
 use std::collections::{HashMap, VecDeque};
+use std::sync::Arc;
 
 use super::frame::{Dims, Frame};
 use super::reader::Dataset;
@@ -217,13 +218,11 @@ pub type FrameStream = Box<dyn Iterator<Item = Result<(usize, Frame), DataError>
 impl Dataset {
     /// The frames of one side of a split (all frames with `None`).
     pub fn split_frames(&self, split: Option<(SplitSpec, Split)>) -> FrameStream {
-        let frames = self.frames();
         match split {
-            None => Box::new(frames),
-            Some((spec, side)) => Box::new(frames.filter(move |item| match item {
-                Ok((_, f)) => spec.of(f.episode) == side,
-                Err(_) => true,
-            })),
+            None => Box::new(self.frames()),
+            Some((spec, side)) => {
+                Box::new(self.frames_where(Arc::new(move |episode| spec.of(episode) == side)))
+            }
         }
     }
 

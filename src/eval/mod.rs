@@ -53,6 +53,8 @@ pub struct EvalOptions {
     pub full_collision: bool,
     pub seed: u64,
     pub threads: usize,
+    /// Lane difficulty level; `None` takes the config's `eval.level`.
+    pub level: Option<usize>,
 }
 
 /// The env config of an evaluation, derived from the training config.
@@ -101,16 +103,16 @@ pub fn evaluate(ck: &Checkpoint, o: &EvalOptions) -> Result<EvalReport, RlError>
     let cfg = ck.config()?;
     let env_cfg = eval_env_config(&cfg, o);
     let length = cfg.eval.lane_length;
+    let level = o.level.unwrap_or(cfg.eval.level);
     let mut t = Tally::default();
     if o.terrain == TerrainKind::Flat {
         let mut env = VecEnv::new(&env_cfg)?;
         run_episodes(ck, &cfg, &mut env, o.episodes, length, &mut t)?;
     } else {
         let map_cfg = &cfg.eval.terrain;
-        if cfg.eval.level > map_cfg.max_level() {
+        if level > map_cfg.max_level() {
             return Err(RlError::Invalid(format!(
-                "eval.level {} is above eval.terrain's top level {}",
-                cfg.eval.level,
+                "level {level} is above eval.terrain's top level {}",
                 map_cfg.max_level()
             )));
         }
@@ -120,7 +122,7 @@ pub fn evaluate(ck: &Checkpoint, o: &EvalOptions) -> Result<EvalReport, RlError>
             let lane = TerrainMap::lane(
                 map_cfg,
                 o.terrain,
-                cfg.eval.level,
+                level,
                 // the terrain is drawn over at least 1 m; success is still
                 // measured at `eval.lane_length`
                 length.max(crate::terrain::lane::MIN_SEGMENT_LENGTH),
@@ -154,7 +156,7 @@ pub fn evaluate(ck: &Checkpoint, o: &EvalOptions) -> Result<EvalReport, RlError>
         mean_forward_speed: t.fwd_sum / d,
         mean_commanded_speed: t.cmd_sum / d,
         lane_length: length,
-        level: (o.terrain != TerrainKind::Flat).then_some(cfg.eval.level),
+        level: (o.terrain != TerrainKind::Flat).then_some(level),
         full_collision: o.full_collision,
         checkpoint: ck.path.display().to_string(),
         checkpoint_iteration: ck.meta.iteration,
