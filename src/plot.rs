@@ -366,14 +366,15 @@ fn draw_panel<'a>(area: &Area<'a>, panel: &Panel, x: &[f64], ys: &[&[f64]]) -> D
         .x_label_area_size(40)
         .y_label_area_size(64)
         .build_cartesian_2d(xr.0..xr.1, yr.0..yr.1)?;
-    let fmt = |v: &f64| tick_label(*v);
+    let xfmt = |v: &f64| axis_tick_label(*v, xr);
+    let yfmt = |v: &f64| axis_tick_label(*v, yr);
     chart
         .configure_mesh()
         .x_desc(panel.x.as_str())
         .x_labels(8)
         .y_labels(8)
-        .x_label_formatter(&fmt)
-        .y_label_formatter(&fmt)
+        .x_label_formatter(&xfmt)
+        .y_label_formatter(&yfmt)
         .max_light_lines(4)
         .bold_line_style(RGBColor(215, 215, 215))
         .light_line_style(RGBColor(242, 242, 242))
@@ -408,6 +409,14 @@ fn draw_panel<'a>(area: &Area<'a>, panel: &Panel, x: &[f64], ys: &[&[f64]]) -> D
         .background_style(WHITE.mix(0.85))
         .border_style(BLACK.mix(0.4))
         .draw()
+}
+
+/// [`tick_label`] of a tick on an axis spanning `range`: a tick within 1e-9 of
+/// the span from zero is zero (the tick generator's `-0.1 + 0.1` would otherwise
+/// read `6.94e-18`).
+pub fn axis_tick_label(v: f64, range: (f64, f64)) -> String {
+    let span = (range.1 - range.0).abs();
+    tick_label(if v.abs() <= span * 1e-9 { 0.0 } else { v })
 }
 
 /// Compact axis label: `0`, `0.25`, `1.5`, `2500`, `20k`, `1.2M`, `3G`, `1.00e-5`.

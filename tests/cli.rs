@@ -112,3 +112,19 @@ fn rollout_reports_a_bad_config_in_one_line() {
     assert_eq!(err.lines().count(), 1, "{err}");
     assert!(err.contains("cannot read config /no/such.yaml"), "{err}");
 }
+
+#[test]
+fn an_os_error_is_printed_once() {
+    let out = bin()
+        .args(["data", "inspect", "/nonexistent/dreampolicy-dataset"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("/nonexistent/dreampolicy-dataset"), "{err}");
+    assert_eq!(
+        err.matches("No such file or directory").count(),
+        1,
+        "the cause once: {err}"
+    );
+}

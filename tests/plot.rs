@@ -5,8 +5,8 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use dreampolicy::plot::{
-    grid, image_size, plot_csv, tick_label, MetricsTable, Panel, PlotError, COLORS, PANEL_SIZE,
-    TITLE_HEIGHT,
+    axis_tick_label, grid, image_size, plot_csv, tick_label, MetricsTable, Panel, PlotError,
+    COLORS, PANEL_SIZE, TITLE_HEIGHT,
 };
 
 /// 200 rows of `step, reward, loss, entropy, kl`, with NaN gaps in `reward`, an
@@ -93,6 +93,10 @@ fn tick_labels_are_compact() {
     ] {
         assert_eq!(tick_label(v), label, "{v}");
     }
+    // rounding noise at zero reads as zero on its axis; small ticks of a small
+    // axis keep their value
+    assert_eq!(axis_tick_label(-0.1 + 0.1 + 6.9e-18, (-0.5, 0.5)), "0");
+    assert_eq!(axis_tick_label(2e-5, (0.0, 1e-4)), "2.00e-5");
 }
 
 #[test]
