@@ -72,6 +72,10 @@ pub struct ModelConfig {
     pub terrain_dim: i64,
     /// Width of the sinusoidal diffusion-step features fed to the step MLP.
     pub step_features: i64,
+    /// Add a linear map of the flattened history to the predicted `x0` (ours,
+    /// zero-initialized): the linear part of the dynamics is learned in a few
+    /// hundred steps, and the transformer models what is left.
+    pub history_skip: bool,
 }
 
 impl Default for ModelConfig {
@@ -86,6 +90,7 @@ impl Default for ModelConfig {
             terrain_hidden: vec![256],
             terrain_dim: 256,
             step_features: 256,
+            history_skip: true,
         }
     }
 }

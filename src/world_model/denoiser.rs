@@ -1,15 +1,17 @@
 //! The DiT denoiser `x0_hat = G(x^n, x_hist, n, y)`.
 //!
 //! Tokens: the `K` clean history states, then the `H` noisy future states, each
-//! `state -> hidden` through one linear map, plus a learned positional embedding
-//! per token. Conditioning `c = MLP(sin/cos(n)) + W y`, with `y` the terrain
+//! `state -> hidden` through a linear map of its own kind (history or noisy), plus
+//! a learned positional embedding per token. Conditioning `c = MLP(sin/cos(n)) + W y`, with `y` the terrain
 //! embedding (an MLP over the normalized scandots, `terrain_dim` wide) or the
 //! learned null embedding (classifier-free guidance). `L` DiT blocks with
 //! adaLN-Zero (shift, scale and gate of the attention and MLP branches from `c`,
 //! zero-initialized so that every block starts as the identity), multi-head
 //! self-attention over all `K + H` tokens, a final adaLN and a linear map back
 //! to the state on the `H` future tokens (zero-initialized: the first prediction
-//! is the normalized mean). Works in normalized units ([`Normalizer`]).
+//! is the normalized mean). With `history_skip`, a linear map of the flattened
+//! history (zero-initialized) is added to that prediction. Works in normalized
+//! units ([`Normalizer`]).
 use tch::nn::{self, Init, LinearConfig, Module};
 use tch::{Device, Kind, Tensor};
 
@@ -173,7 +175,9 @@ pub struct Denoiser {
     state_dim: i64,
     scan_dim: i64,
     embed: nn::Linear,
+    embed_hist: nn::Linear,
     pos: Tensor,
+    skip: Option<nn::Linear>,
     step1: nn::Linear,
     step2: nn::Linear,
     terrain: Vec<nn::Linear>,
@@ -215,7 +219,12 @@ impl Denoiser {
         ));
         Denoiser {
             embed: nn::linear(&root / "embed", s, d, Default::default()),
+            embed_hist: nn::linear(&root / "embed_hist", s, d, Default::default()),
             pos: root.var("pos", &[tokens, d], std),
+            skip: cfg.history_skip.then(|| {
+                let (k, h) = (cfg.history as i64, cfg.horizon as i64);
+                zero_linear(&root / "skip", k * s, h * s)
+            }),
             step1: nn::linear(&root / "step1", cfg.step_features, d, Default::default()),
             step2: nn::linear(&root / "step2", d, d, Default::default()),
             terrain,
@@ -325,7 +334,8 @@ impl Denoiser {
         let d = self.cfg.hidden;
         let k = self.cfg.history as i64;
         let h = self.cfg.horizon as i64;
-        let tokens = self.embed.forward(&Tensor::cat(&[hist, x_n], 1)) + self.pos.unsqueeze(0);
+        let tokens = Tensor::cat(&[self.embed_hist.forward(hist), self.embed.forward(x_n)], 1)
+            + self.pos.unsqueeze(0);
         let step = self
             .step2
             .forward(&self.step1.forward(&self.step_features(n)).silu());
@@ -337,7 +347,16 @@ impl Denoiser {
         }
         let m = self.final_ada.forward(&c_act).chunk(2, -1);
         let x = modulate(&layer_norm(&x.narrow(1, k, h), d), &m[0], &m[1]);
-        self.out.forward(&x)
+        let out = self.out.forward(&x);
+        match &self.skip {
+            Some(skip) => {
+                let b = hist.size()[0];
+                out + skip
+                    .forward(&hist.reshape([b, -1]))
+                    .view([b, h, self.state_dim])
+            }
+            None => out,
+        }
     }
 
     /// Forward FLOPs of the matrix products for one sample (2 per multiply-add):
@@ -359,7 +378,13 @@ impl Denoiser {
         }
         terrain += last * c.terrain_dim as f64;
         let cond = c.step_features as f64 * d + d * d + c.terrain_dim as f64 * d + 2.0 * d * d;
+        let skip = if c.history_skip {
+            (c.history * c.horizon) as f64 * s * s
+        } else {
+            0.0
+        };
         2.0 * (t * s * d
+            + skip
             + c.layers as f64 * (per_block_tokens + per_block_cond)
             + c.horizon as f64 * d * s
             + terrain
