@@ -383,7 +383,9 @@ fn draw_panel<'a>(area: &Area<'a>, panel: &Panel, x: &[f64], ys: &[&[f64]]) -> D
         .draw()?;
     for (k, (name, segs)) in panel.ys.iter().zip(&lines).enumerate() {
         let (r, g, b) = COLORS[k % COLORS.len()];
-        let style = RGBColor(r, g, b).stroke_width(2);
+        // 1 px: plotters' bitmap backend strokes wider polylines with joins that
+        // shoot out of the chart at steep spikes (plotters-rs/plotters#549)
+        let style = RGBColor(r, g, b).stroke_width(1);
         // one legend entry per column, on an empty series so it exists without data
         let label = if segs.is_empty() {
             format!("{name} (no data)")

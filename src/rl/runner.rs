@@ -535,6 +535,7 @@ pub fn plot_run(run_dir: &Path) -> Result<PathBuf, crate::plot::PlotError> {
             x,
             &["time_physics_s", "time_inference_s", "time_update_s"],
         ),
+        Panel::new("mean terrain level", x, &["terrain_level"]),
     ];
     crate::run::plot_training(run_dir, &panels)
 }
