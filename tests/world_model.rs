@@ -12,9 +12,7 @@ use std::path::Path;
 
 use common::Scratch;
 use dreampolicy::config::{world_model_from_str, SamplerKind, SamplingConfig, WorldModelConfig};
-use dreampolicy::data::{
-    episode_id, Dataset, DatasetInfo, Dims, Frame, ReadOptions, ShardWriter, WriterOptions,
-};
+use dreampolicy::data::{Dataset, ReadOptions};
 use dreampolicy::run::latest_checkpoint;
 use dreampolicy::terrain::TerrainKind;
 use dreampolicy::world_model::sampler::{guided_x0, sample};
@@ -38,33 +36,14 @@ fn torch_lock() -> std::sync::MutexGuard<'static, ()> {
 /// episode's ordinal, scan[0] = the step, the other scandots the episode's
 /// terrain height.
 fn write_dataset(dir: &Path, n_envs: u32, steps: u32) {
-    let dims = Dims::G1;
-    let mut w = ShardWriter::create(
+    common::write_synthetic_shard(
         dir,
-        0,
-        dims,
-        DatasetInfo::default(),
-        WriterOptions::default(),
-    )
-    .unwrap();
-    let mut ordinal = 0u32;
-    let mut ep: Vec<(u32, u32)> = (0..n_envs)
-        .map(|_| {
-            ordinal += 1;
-            (ordinal - 1, 0)
-        })
-        .collect();
-    let mut f = Frame::zeros(dims);
-    for _ in 0..steps {
-        for env in 0..n_envs {
-            let (ord, step) = ep[env as usize];
-            let len = 20 + 5 * env;
-            f.episode = episode_id(0, ord);
-            f.env = env;
-            f.step = step;
+        n_envs,
+        steps,
+        |env| 20 + 5 * env,
+        |f, ord, _env, step| {
             f.terrain = TerrainKind::TRAINING[(ord % 5) as usize];
             f.level = ord % 3;
-            f.terminated = step + 1 == len;
             let phase = ord as f32 * 0.7;
             let freq = 0.2 + 0.02 * (ord % 4) as f32;
             for (j, v) in f.state.iter_mut().enumerate() {
@@ -78,16 +57,8 @@ fn write_dataset(dir: &Path, n_envs: u32, steps: u32) {
             for (j, v) in f.action.iter_mut().enumerate() {
                 *v = j as f32 * 0.01;
             }
-            w.write(&f).unwrap();
-            ep[env as usize] = if f.terminated {
-                ordinal += 1;
-                (ordinal - 1, 0)
-            } else {
-                (ord, step + 1)
-            };
-        }
-    }
-    w.finish().unwrap();
+        },
+    );
 }
 
 /// A tiny model on `dir`; `extra` are `--set` overrides.

@@ -11,7 +11,6 @@ use std::process::Command;
 
 use common::Scratch;
 use dreampolicy::config::world_model_from_str;
-use dreampolicy::data::{episode_id, DatasetInfo, Dims, Frame, ShardWriter, WriterOptions};
 use dreampolicy::run::latest_checkpoint;
 use dreampolicy::terrain::TerrainKind;
 use dreampolicy::world_model::{evaluate, train, WmEvalOptions};
@@ -21,28 +20,15 @@ use dreampolicy::world_model::{evaluate, train, WmEvalOptions};
 /// signals whose frequency depends on the kind, its scandots a kind-specific
 /// pattern.
 fn write_dataset(dir: &Path, n_envs: u32, steps: u32) {
-    let dims = Dims::G1;
-    let mut w = ShardWriter::create(
+    common::write_synthetic_shard(
         dir,
-        0,
-        dims,
-        DatasetInfo::default(),
-        WriterOptions::default(),
-    )
-    .unwrap();
-    let mut next = n_envs;
-    let mut ep: Vec<(u32, u32)> = (0..n_envs).map(|e| (e, 0)).collect();
-    let mut f = Frame::zeros(dims);
-    for _ in 0..steps {
-        for env in 0..n_envs {
-            let (ord, step) = ep[env as usize];
+        n_envs,
+        steps,
+        |env| 40 + 10 * env,
+        |f, ord, _env, step| {
             let kind = (ord % 5) as usize;
-            f.episode = episode_id(0, ord);
-            f.env = env;
-            f.step = step;
             f.terrain = TerrainKind::TRAINING[kind];
             f.level = 0;
-            f.terminated = step + 1 == 40 + 10 * env;
             let freq = 0.15 + 0.05 * kind as f32;
             for (j, v) in f.state.iter_mut().enumerate() {
                 *v = (freq * step as f32 * (1.0 + 0.01 * j as f32) + 0.3 * ord as f32).sin();
@@ -50,16 +36,8 @@ fn write_dataset(dir: &Path, n_envs: u32, steps: u32) {
             for (j, v) in f.scan.iter_mut().enumerate() {
                 *v = -0.75 + 0.1 * kind as f32 * ((j + kind) % 3) as f32;
             }
-            w.write(&f).unwrap();
-            ep[env as usize] = if f.terminated {
-                next += 1;
-                (next - 1, 0)
-            } else {
-                (ord, step + 1)
-            };
-        }
-    }
-    w.finish().unwrap();
+        },
+    );
 }
 
 /// Train the tiny model for a few steps; its checkpoint.

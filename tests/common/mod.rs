@@ -38,3 +38,49 @@ pub fn load_config(name: &str, sets: &[&str]) -> dreampolicy::config::Experiment
     let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
     dreampolicy::config::load(&path, &sets).unwrap()
 }
+
+/// Write shard 0 of a synthetic G1 dataset into `dir`: `n_envs` envs stepped
+/// `steps` times, env `e` running episodes of `episode_len(e)` steps back to
+/// back. Episode ordinals are `0..n_envs` for the first episodes, then count up
+/// in the order episodes start. This sets the ids, the step and the done flag;
+/// `fill(frame, ordinal, env, step)` writes the rest (the frame is reused, so a
+/// field `fill` never writes keeps its zero).
+pub fn write_synthetic_shard(
+    dir: &std::path::Path,
+    n_envs: u32,
+    steps: u32,
+    episode_len: impl Fn(u32) -> u32,
+    mut fill: impl FnMut(&mut dreampolicy::data::Frame, u32, u32, u32),
+) {
+    use dreampolicy::data::{episode_id, DatasetInfo, Dims, Frame, ShardWriter, WriterOptions};
+    let dims = Dims::G1;
+    let mut w = ShardWriter::create(
+        dir,
+        0,
+        dims,
+        DatasetInfo::default(),
+        WriterOptions::default(),
+    )
+    .unwrap();
+    let mut next = n_envs;
+    let mut ep: Vec<(u32, u32)> = (0..n_envs).map(|e| (e, 0)).collect();
+    let mut f = Frame::zeros(dims);
+    for _ in 0..steps {
+        for env in 0..n_envs {
+            let (ord, step) = ep[env as usize];
+            f.episode = episode_id(0, ord);
+            f.env = env;
+            f.step = step;
+            f.terminated = step + 1 == episode_len(env);
+            fill(&mut f, ord, env, step);
+            w.write(&f).unwrap();
+            ep[env as usize] = if f.terminated {
+                next += 1;
+                (next - 1, 0)
+            } else {
+                (ord, step + 1)
+            };
+        }
+    }
+    w.finish().unwrap();
+}
