@@ -4,22 +4,26 @@
 //! guidance 0 and 1 are exactly the unconditional and conditional models, the
 //! scheduled-sampling probability is the paper's function (and the trainer
 //! follows it), training sequences stay inside an episode, a resumed run is
-//! bit-identical to an uninterrupted one, the rollout API chains calls, and bad
-//! configs and checkpoints are clear errors.
+//! bit-identical to an uninterrupted one, the rollout API chains calls, a map
+//! terrain source reads the scandots along the predicted path, and bad configs
+//! and checkpoints are clear errors.
 mod common;
 
 use std::path::Path;
 
 use common::Scratch;
-use dreampolicy::config::{world_model_from_str, SamplerKind, SamplingConfig, WorldModelConfig};
+use dreampolicy::config::{
+    world_model_from_str, ObservationConfig, SamplerKind, SamplingConfig, WorldModelConfig,
+};
 use dreampolicy::data::{Dataset, ReadOptions};
+use dreampolicy::env::obs::{scan_point, ANG_VEL, COMMAND, SCAN_DIM};
 use dreampolicy::run::latest_checkpoint;
 use dreampolicy::terrain::TerrainKind;
 use dreampolicy::world_model::sampler::{guided_x0, sample};
 use dreampolicy::world_model::sequences::Sequences;
 use dreampolicy::world_model::{
-    rollout_probability, train, Denoiser, FixedTerrain, Noise, NoiseSchedule, WmCheckpoint,
-    WmError, WmTrainer, WorldModel,
+    rollout_probability, train, Denoiser, FixedTerrain, MapTerrain, Noise, NoiseSchedule, Pose,
+    TerrainSource, WmCheckpoint, WmError, WmTrainer, WorldModel,
 };
 use tch::{Device, Kind, Tensor};
 
@@ -431,6 +435,113 @@ fn rollout_chains_calls_and_reads_the_terrain_per_call() {
         .unwrap()
         .to_string();
     assert!(e.contains("history must be"), "{e}");
+}
+
+/// Scandots `[C]` of row `b`.
+fn scan_row(t: &Tensor, b: i64) -> Vec<f32> {
+    Vec::<f32>::try_from(t.get(b)).unwrap()
+}
+
+#[test]
+fn map_terrain_reads_the_scandots_along_the_predicted_path() {
+    let _t = torch_lock();
+    let obs = ObservationConfig::default();
+    let (sc, dt) = (obs.scales.clone(), 0.02);
+    // a 0.2 m step up at x = 0.95; the pelvis 0.78 m above the ground
+    let ground = |x: f64, _y: f64| if x >= 0.95 { 0.2 } else { 0.0 };
+    let start = [([0.0, 0.0, 0.78], 0.0)];
+    let mut map = MapTerrain::new(ground, &start, &obs, dt);
+    let hist = Tensor::zeros([1, 4, 98], (Kind::Float, Device::Cpu));
+    let s0 = scan_row(&map.scandots(&hist, 0).unwrap(), 0);
+    assert_eq!(s0.len(), SCAN_DIM);
+    for (k, v) in s0.iter().enumerate() {
+        let want = if scan_point(k).0 >= 0.95 {
+            0.2 - 0.78
+        } else {
+            -0.78
+        };
+        assert!((*v as f64 - want).abs() < 1e-6, "point {k}: {v} vs {want}");
+    }
+    let on_step = |s: &[f32]| s.iter().filter(|v| **v > -0.7).count();
+    assert_eq!(on_step(&s0), SCAN_DIM / 17); // the front column, x = 1.0
+
+    // 8 predicted frames walking at 0.5 m/s, no turn: 0.08 m per call
+    let walk = |vx: f64, wz: f64| {
+        let p = Tensor::zeros([1, 8, 98], (Kind::Float, Device::Cpu));
+        let _ = p
+            .narrow(2, COMMAND.start as i64, 1)
+            .fill_(vx * sc.commands[0]);
+        let _ = p
+            .narrow(2, ANG_VEL.start as i64 + 2, 1)
+            .fill_(wz * sc.ang_vel);
+        p
+    };
+    let mut seen = vec![on_step(&s0)];
+    for call in 1..=5 {
+        map.advance(&walk(0.5, 0.0)).unwrap();
+        let x = map.poses()[0].x;
+        assert!((x - 0.08 * call as f64).abs() < 1e-6, "x {x}");
+        seen.push(on_step(&scan_row(&map.scandots(&hist, call).unwrap(), 0)));
+    }
+    // the step comes closer: more scandots read it, a column per 0.1 m
+    assert!(seen.windows(2).all(|w| w[1] >= w[0]), "{seen:?}");
+    assert_eq!(*seen.last().unwrap(), 5 * SCAN_DIM / 17, "{seen:?}"); // x = 0.4: 0.55..1.0 ahead
+                                                                      // the same scandots as a source started where this one stands
+    let here = map.poses()[0];
+    let mut fresh = MapTerrain::new(ground, &[([here.x, 0.0, 0.78], 0.0)], &obs, dt);
+    assert!(map
+        .scandots(&hist, 6)
+        .unwrap()
+        .equal(&fresh.scandots(&hist, 0).unwrap()));
+    // turning: 0.5 rad/s for 8 frames turns the heading by 0.08 rad
+    map.advance(&walk(0.0, 0.5)).unwrap();
+    let p = map.poses()[0];
+    assert!(
+        (p.yaw - 0.08).abs() < 1e-6 && (p.x - here.x).abs() < 1e-9,
+        "{p:?}"
+    );
+    // a wrong batch is an error
+    let e = map
+        .scandots(&Tensor::zeros([2, 4, 98], (Kind::Float, Device::Cpu)), 0)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("map terrain"), "{e}");
+
+    // in a rollout the source sees every call's prediction, in order: its pose
+    // is the integration of the rollout's frames
+    let dir = Scratch::new("wm-map-terrain");
+    let data = dir.0.join("data");
+    write_dataset(&data, 4, 40);
+    let cfg = tiny(&data, &["train.iterations=2"]);
+    let run = dir.0.join("run");
+    train(&cfg, &run, false, true).unwrap();
+    let wm = WorldModel::load(&latest_checkpoint(&run), Device::Cpu).unwrap();
+    let (hist, _) = inputs(&cfg, 2, 3);
+    let starts = [([1.0, 2.0, 0.78], 0.3), ([-1.0, 0.5, 0.75], -1.0)];
+    let mut map = MapTerrain::new(|_: f64, _: f64| 0.0, &starts, &obs, dt);
+    let out = wm
+        .rollout(&hist, &mut map, 12, &wm.cfg.sampling.clone(), 1)
+        .unwrap();
+    for (b, &(p0, yaw0)) in starts.iter().enumerate() {
+        let mut want = Pose {
+            x: p0[0],
+            y: p0[1],
+            yaw: yaw0,
+        };
+        let frames = Vec::<f32>::try_from(out.get(b as i64).flatten(0, -1)).unwrap();
+        for s in frames.chunks(98) {
+            let vx = s[COMMAND.start] as f64 / sc.commands[0];
+            let vy = s[COMMAND.start + 1] as f64 / sc.commands[1];
+            let (sy, cy) = want.yaw.sin_cos();
+            want.x += (cy * vx - sy * vy) * dt;
+            want.y += (sy * vx + cy * vy) * dt;
+            want.yaw += s[ANG_VEL.start + 2] as f64 / sc.ang_vel * dt;
+        }
+        let got = map.poses()[b];
+        let d = (got.x - want.x).abs() + (got.y - want.y).abs() + (got.yaw - want.yaw).abs();
+        assert!(d < 1e-6, "row {b}: {got:?} vs {want:?}");
+    }
 }
 
 #[test]

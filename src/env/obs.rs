@@ -59,6 +59,22 @@ pub fn scan_point(k: usize) -> (f64, f64) {
     )
 }
 
+/// Scandot `k` without noise or scale: the ground height at the point's world
+/// position minus the pelvis height (m), clipped to `+-clip`. The pelvis is at
+/// `base_pos` with yaw `(sin, cos)`.
+pub fn scan_height(
+    ground: &dyn Fn(f64, f64) -> f64,
+    base_pos: [f64; 3],
+    (sy, cy): (f64, f64),
+    k: usize,
+    clip: f64,
+) -> f64 {
+    let (px, py) = scan_point(k);
+    let x = base_pos[0] + cy * px - sy * py;
+    let y = base_pos[1] + sy * px + cy * py;
+    (ground(x, y) - base_pos[2]).clamp(-clip, clip)
+}
+
 const _: () = assert!(OBS_DIM == 98, "the paper's state is 98 floats");
 const _: () = assert!(SCAN_DIM == 187, "the paper's scandots are 187 floats");
 
@@ -146,17 +162,14 @@ pub fn write(
     }
 
     // scandots in the yaw-aligned frame
-    let (sy, cy) = s.yaw.sin_cos();
+    let yaw = s.yaw.sin_cos();
     let noise = if oc.add_noise {
         oc.noise.scan * oc.noise_level
     } else {
         0.0
     };
     for (k, out) in scan.iter_mut().enumerate().take(SCAN_DIM) {
-        let (px, py) = scan_point(k);
-        let x = s.base_pos[0] + cy * px - sy * py;
-        let y = s.base_pos[1] + sy * px + cy * py;
-        let rel = ((ctx.ground)(x, y) - s.base_pos[2]).clamp(-oc.scan_clip, oc.scan_clip);
+        let rel = scan_height(ctx.ground, s.base_pos, yaw, k, oc.scan_clip);
         let e = if noise > 0.0 {
             rng.random_range(-noise..=noise)
         } else {

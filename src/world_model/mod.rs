@@ -13,6 +13,8 @@
 //!   from the x0 prediction, with classifier-free guidance; seeded noise.
 //! * [`rollout`]: [`WorldModel`] (a trained checkpoint's EMA denoiser) and the
 //!   autoregressive rollout API over a [`TerrainSource`].
+//! * [`map_terrain`]: [`MapTerrain`], the scandots of a terrain map read along
+//!   the path a rollout predicts.
 //! * [`sequences`]: training sequences (`K + T H` frames of one episode, the
 //!   scandots at each chunk's anchor) drawn from the dataset, epoch by epoch,
 //!   with a position that a checkpoint restores exactly.
@@ -26,6 +28,7 @@ use std::path::PathBuf;
 pub mod checkpoint;
 pub mod denoiser;
 pub mod eval;
+pub mod map_terrain;
 pub mod rollout;
 pub mod sampler;
 pub mod schedule;
@@ -35,6 +38,7 @@ pub mod trainer;
 pub use checkpoint::WmCheckpoint;
 pub use denoiser::{Denoiser, Normalizer};
 pub use eval::{evaluate, WmEvalOptions, WmEvalReport};
+pub use map_terrain::{MapTerrain, Pose};
 pub use rollout::{FixedTerrain, TerrainSource, WorldModel};
 pub use sampler::{sample, Noise};
 pub use schedule::{rollout_probability, NoiseSchedule};

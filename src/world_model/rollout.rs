@@ -6,9 +6,10 @@
 //! terrain comes from a [`TerrainSource`]: fixed scandots ([`FixedTerrain`]), or
 //! any closure `FnMut(&Tensor, usize) -> Result<Tensor, WmError>` that is given
 //! the current `K` states (`[B, K, S]`, newest last) and the call number and
-//! returns the scandots `[B, C]` there, e.g. read along the predicted path from
-//! a terrain map. The state is invariant to global position and yaw, so such a
-//! closure integrates the pose itself (from the predicted velocities).
+//! returns the scandots `[B, C]` there, or [`super::map_terrain::MapTerrain`],
+//! which reads them from a terrain map along the predicted path (the state is
+//! invariant to global position and yaw, so it integrates the pose itself from
+//! each prediction, given to [`TerrainSource::advance`]).
 use std::path::Path;
 
 use tch::{Device, Tensor};
@@ -25,6 +26,13 @@ pub trait TerrainSource {
     /// Scandots `[B, C]` (raw) for the call `call` (from 0) whose history is
     /// `states` (`[B, K, S]`, raw, newest last).
     fn scandots(&mut self, states: &Tensor, call: usize) -> Result<Tensor, WmError>;
+
+    /// Called after each call with its prediction `[B, H, S]` (raw), before the
+    /// next call's [`TerrainSource::scandots`]: a source that follows the
+    /// predicted path moves along it here. Nothing by default.
+    fn advance(&mut self, _predicted: &Tensor) -> Result<(), WmError> {
+        Ok(())
+    }
 }
 
 /// The same scandots at every call (`[B, C]` or `[C]`, broadcast to the batch).
@@ -160,6 +168,7 @@ impl WorldModel {
         while made < frames {
             let scan = terrain.scandots(&hist, call)?;
             let pred = self.predict(&hist, &scan, sampling, &mut noise)?;
+            terrain.advance(&pred)?;
             let all = Tensor::cat(&[&hist.to_device(pred.device()), &pred], 1);
             hist = all.narrow(1, h, k);
             out.push(pred);
