@@ -820,11 +820,12 @@ fn eval_cmd(a: EvalArgs) -> Result<()> {
                 .with_context(|| format!("evaluating {name} on {}", kind.name()))?;
             if !a.json {
                 println!(
-                    "{name}: {} lanes of {:.0} m ({}{}): success {:.3}, completion {:.3}, velocity error {:.3} m/s, {} falls, {} time-outs, mean speed {:.2} m/s (commanded {:.2})",
+                    "{name}: {} lanes of {:.0} m ({}{}): success {:.3}, completion {:.3}, velocity error {:.3} m/s, {} falls, {} time-outs, mean speed {:.2} m/s (commanded {:.2}), ankle {:.3} m at the top of a swing, {:.3} m in stance",
                     r.episodes, r.lane_length, r.terrain,
                     r.level.map(|l| format!(", level {l}")).unwrap_or_default(),
                     r.success_rate, r.completion_rate,
-                    r.vel_tracking_error, r.falls, r.timeouts, r.mean_forward_speed, r.mean_commanded_speed
+                    r.vel_tracking_error, r.falls, r.timeouts, r.mean_forward_speed, r.mean_commanded_speed,
+                    r.swing_peak_height, r.stance_foot_height
                 );
             }
             row.push(r);

@@ -79,6 +79,26 @@ fn eval_counts_successes_time_outs_and_completion() {
 }
 
 #[test]
+fn eval_measures_the_walkers_foot_clearance() {
+    // the committed flat walker on two flat lanes (full collisions)
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("models/checkpoints/flat/checkpoints/latest.pt");
+    let ck = Checkpoint::read(&path).unwrap();
+    let r = evaluate(&ck, &opts(2)).unwrap();
+    assert_eq!(r.success_rate, 1.0);
+    // the ankle frame sits a few cm above the sole in stance, and every swing
+    // lifts it higher (by about 3 cm for this walker)
+    let (top, stance) = (r.swing_peak_height, r.stance_foot_height);
+    assert!((0.01..0.06).contains(&stance), "stance {stance}");
+    assert!(
+        top > stance + 0.01 && top < 0.2,
+        "swing top {top}, stance {stance}"
+    );
+    let json = serde_json::to_value(&r).unwrap();
+    assert!(json["swing_peak_height"].as_f64().is_some());
+}
+
+#[test]
 fn exported_torchscript_gives_the_checkpoints_actions() {
     export_matches(&[]);
 }

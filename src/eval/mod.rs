@@ -32,6 +32,15 @@ pub struct EvalReport {
     /// Mean forward speed along the lane over all episodes (m/s).
     pub mean_forward_speed: f64,
     pub mean_commanded_speed: f64,
+    /// The gait's foot clearance: ankle height above the ground under it at the
+    /// top of each swing (a foot's highest point between lift-off and
+    /// touchdown, over swings of at least [`MIN_SWING_STEPS`] control steps),
+    /// averaged over the swings of both feet (m; NaN without one).
+    pub swing_peak_height: f64,
+    /// Mean ankle height above the ground while a foot is in contact (m): the
+    /// sole's offset, so that `swing_peak_height - stance_foot_height` is the
+    /// clearance of the sole.
+    pub stance_foot_height: f64,
     pub lane_length: f64,
     /// Curriculum level of the lanes (None for flat lanes, which are the plane).
     pub level: Option<usize>,
@@ -42,6 +51,10 @@ pub struct EvalReport {
     pub mujoco_version: String,
     pub seed: u64,
 }
+
+/// Shorter flights of a foot (a contact lost for a step or two while it
+/// slides or bounces) are not swings for `swing_peak_height`.
+pub const MIN_SWING_STEPS: u32 = 5;
 
 /// How to evaluate.
 #[derive(Debug, Clone)]
@@ -155,6 +168,8 @@ pub fn evaluate(ck: &Checkpoint, o: &EvalOptions) -> Result<EvalReport, RlError>
         timeouts: t.timeouts,
         mean_forward_speed: t.fwd_sum / d,
         mean_commanded_speed: t.cmd_sum / d,
+        swing_peak_height: t.swing_sum / t.swings as f64,
+        stance_foot_height: t.stance_sum / t.stance_n as f64,
         lane_length: length,
         level: (o.terrain != TerrainKind::Flat).then_some(level),
         full_collision: o.full_collision,
@@ -189,6 +204,8 @@ fn run_episodes(
     let mut started = n.min(episodes);
     let mut counted: Vec<bool> = (0..n).map(|i| i < started).collect();
     let (mut steps, mut speed) = (vec![0u64; n], vec![0.0f64; n]);
+    // each foot's highest point and steps in its current swing (None: in contact)
+    let mut peak = vec![[None::<(f64, u32)>; 2]; n];
     while t.done < target {
         agent.step_mean(env);
         for i in 0..n {
@@ -215,6 +232,7 @@ fn run_episodes(
                         (s.command[0] - s.base_lin_vel[0]).hypot(s.command[1] - s.base_lin_vel[1]);
                     t.err_n += 1;
                     speed[i] += s.base_lin_vel_world[0];
+                    t.feet(s, &mut peak[i]);
                 }
                 let dist = s.base_pos[0] - e.spawn()[0];
                 (dist >= length).then_some((Ending::Success, length, s.command[0]))
@@ -234,6 +252,7 @@ fn run_episodes(
             started += counted[i] as usize;
             steps[i] = 0;
             speed[i] = 0.0;
+            peak[i] = [None; 2];
             if end == Ending::Success {
                 env.reset_env(i);
                 agent.reset_history_env(i, env.obs());
@@ -262,9 +281,32 @@ struct Tally {
     err_n: u64,
     fwd_sum: f64,
     cmd_sum: f64,
+    swing_sum: f64,
+    swings: u64,
+    stance_sum: f64,
+    stance_n: u64,
 }
 
 impl Tally {
+    /// One step of the feet: a swing's peak is counted at its touchdown.
+    fn feet(&mut self, s: &crate::env::state::EnvState, peak: &mut [Option<(f64, u32)>; 2]) {
+        for (k, p) in peak.iter_mut().enumerate() {
+            let h = s.feet_pos[k][2] - s.feet_ground[k];
+            if s.feet_contact[k] {
+                self.stance_sum += h;
+                self.stance_n += 1;
+                if let Some((top, n)) = p.take() {
+                    if n >= MIN_SWING_STEPS {
+                        self.swing_sum += top;
+                        self.swings += 1;
+                    }
+                }
+            } else {
+                *p = Some(p.map_or((h, 1), |(top, n)| (top.max(h), n + 1)));
+            }
+        }
+    }
+
     fn add(&mut self, end: Ending, completion: f64, speed: f64, cmd: f64) {
         self.done += 1;
         match end {
