@@ -393,16 +393,23 @@ fn a_resumed_run_is_bit_identical() {
     dreampolicy::config::load_world_model(&half.join("config.yaml"), &[]).unwrap();
 }
 
-#[test]
-fn rollout_chains_calls_and_reads_the_terrain_per_call() {
-    let _t = torch_lock();
-    let dir = Scratch::new("wm-rollout");
+/// A tiny model trained for two steps on the synthetic dataset, loaded as a
+/// `WorldModel` (its checkpoint lives in a scratch directory named `name`).
+fn two_step_model(name: &str) -> (WorldModel, WorldModelConfig) {
+    let dir = Scratch::new(name);
     let data = dir.0.join("data");
     write_dataset(&data, 4, 40);
     let cfg = tiny(&data, &["train.iterations=2"]);
     let run = dir.0.join("run");
     train(&cfg, &run, false, true).unwrap();
     let wm = WorldModel::load(&latest_checkpoint(&run), Device::Cpu).unwrap();
+    (wm, cfg)
+}
+
+#[test]
+fn rollout_chains_calls_and_reads_the_terrain_per_call() {
+    let _t = torch_lock();
+    let (wm, cfg) = two_step_model("wm-rollout");
     let (hist, scan) = inputs(&cfg, 2, 3);
     let sc = wm.cfg.sampling.clone();
     // 10 frames = 3 calls of H = 4; the closure sees each call's history
@@ -510,13 +517,7 @@ fn map_terrain_reads_the_scandots_along_the_predicted_path() {
 
     // in a rollout the source sees every call's prediction, in order: its pose
     // is the integration of the rollout's frames
-    let dir = Scratch::new("wm-map-terrain");
-    let data = dir.0.join("data");
-    write_dataset(&data, 4, 40);
-    let cfg = tiny(&data, &["train.iterations=2"]);
-    let run = dir.0.join("run");
-    train(&cfg, &run, false, true).unwrap();
-    let wm = WorldModel::load(&latest_checkpoint(&run), Device::Cpu).unwrap();
+    let (wm, cfg) = two_step_model("wm-map-terrain");
     let (hist, _) = inputs(&cfg, 2, 3);
     let starts = [([1.0, 2.0, 0.78], 0.3), ([-1.0, 0.5, 0.75], -1.0)];
     let mut map = MapTerrain::new(|_: f64, _: f64| 0.0, &starts, &obs, dt);
