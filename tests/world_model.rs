@@ -20,7 +20,7 @@ use dreampolicy::env::obs::{scan_point, ANG_VEL, COMMAND, SCAN_DIM};
 use dreampolicy::run::latest_checkpoint;
 use dreampolicy::terrain::TerrainKind;
 use dreampolicy::world_model::sampler::{guided_x0, sample};
-use dreampolicy::world_model::sequences::Sequences;
+use dreampolicy::world_model::sequences::{validation_windows, Sequences};
 use dreampolicy::world_model::{
     rollout_probability, train, Denoiser, FixedTerrain, MapTerrain, Noise, NoiseSchedule, Pose,
     TerrainSource, WmCheckpoint, WmError, WmTrainer, WorldModel,
@@ -391,6 +391,42 @@ fn a_resumed_run_is_bit_identical() {
     );
     // the config written into the run loads back as a world-model config
     dreampolicy::config::load_world_model(&half.join("config.yaml"), &[]).unwrap();
+}
+
+#[test]
+fn validation_sequences_are_drawn_from_the_whole_split() {
+    let dir = Scratch::new("wm-val-spread");
+    let data = dir.0.join("data");
+    // 4 envs x 400 steps: about 60 episodes of 20-35 frames in stream order
+    write_dataset(&data, 4, 400);
+    let cfg = tiny(&data, &[]);
+    let ds = Dataset::open(&data, ReadOptions::default()).unwrap();
+    let all = validation_windows(&ds, &cfg, usize::MAX).unwrap();
+    let some = validation_windows(&ds, &cfg, 16).unwrap();
+    assert_eq!(some.len(), 16);
+    assert!(all.len() > 100, "{}", all.len());
+    // the sample is seeded, in stream order, and spread over the split: many
+    // episodes, late ones too (the first 16 windows come from two episodes)
+    let again = validation_windows(&ds, &cfg, 16).unwrap();
+    let ids = |w: &[dreampolicy::data::Window]| -> Vec<(u64, u32)> {
+        w.iter().map(|w| (w.episode, w.first_step)).collect()
+    };
+    assert_eq!(ids(&some), ids(&again));
+    let pos: Vec<usize> = ids(&some)
+        .iter()
+        .map(|id| ids(&all).iter().position(|a| a == id).unwrap())
+        .collect();
+    assert!(pos.windows(2).all(|p| p[0] < p[1]), "{pos:?}");
+    let first: std::collections::BTreeSet<u64> = all[..16].iter().map(|w| w.episode).collect();
+    let drawn: std::collections::BTreeSet<u64> = some.iter().map(|w| w.episode).collect();
+    assert!(first.len() <= 3, "{first:?}");
+    assert!(drawn.len() >= 6, "{drawn:?}");
+    assert!(*pos.last().unwrap() > all.len() / 2, "{pos:?}");
+    // more asked than there are: all of them
+    assert_eq!(
+        ids(&validation_windows(&ds, &cfg, all.len() + 5).unwrap()),
+        ids(&all)
+    );
 }
 
 /// A tiny model trained for two steps on the synthetic dataset, loaded as a

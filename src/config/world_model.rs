@@ -193,7 +193,8 @@ pub struct WmTrainConfig {
     /// Validation (EMA x0 loss and autoregressive rollout error) every this many
     /// steps (0 = never).
     pub eval_interval: usize,
-    /// Validation sequences (fixed, the first of the validation split).
+    /// Validation sequences (fixed: a seeded uniform sample of the whole
+    /// validation split).
     pub val_sequences: usize,
     /// Resume checkpoint every this many steps (0 = only at the end).
     pub save_interval: usize,

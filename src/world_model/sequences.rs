@@ -5,6 +5,8 @@
 //! after another, each epoch with its own shuffle seed; the position (epoch,
 //! sequences consumed in it) is what a checkpoint saves, and [`Sequences::seek`]
 //! reopens the stream there, so a resumed run sees exactly the same batches.
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use tch::{Device, Tensor};
 
 use super::denoiser::Normalizer;
@@ -199,8 +201,12 @@ impl Sequences {
     }
 }
 
-/// The first `n` sequences of the validation split, in stream order (fewer if
-/// the split has fewer; none when it is empty).
+/// `n` sequences drawn uniformly from the whole validation split (fewer if the
+/// split has fewer; none when it is empty), in stream order: a seeded reservoir
+/// sample (Algorithm R) over every validation window, so that they come from
+/// every shard and terrain kind in proportion to its frames. (The first `n` in
+/// stream order came from a few episodes of the first shard: on a dataset whose
+/// first shards are one specialist's, validation measured that terrain only.)
 pub fn validation_windows(
     dataset: &Dataset,
     cfg: &WorldModelConfig,
@@ -208,12 +214,26 @@ pub fn validation_windows(
 ) -> Result<Vec<Window>, WmError> {
     let spec = Sequences::spec(cfg)?;
     let split = SplitSpec::new(cfg.data.val_fraction, cfg.data.split_seed)?;
-    let mut out = Vec::new();
-    for w in dataset.windows(spec, Some((split, Split::Validation))) {
-        if out.len() >= n {
-            break;
-        }
-        out.push(w?);
+    let mut rng = ChaCha8Rng::seed_from_u64(splitmix64(cfg.data.split_seed ^ 0x7A11_D5E7));
+    let mut kept: Vec<(u64, Window)> = Vec::with_capacity(n.min(4096));
+    if n == 0 {
+        return Ok(Vec::new());
     }
-    Ok(out)
+    for (i, w) in dataset
+        .windows(spec, Some((split, Split::Validation)))
+        .enumerate()
+    {
+        let w = w?;
+        let i = i as u64;
+        if kept.len() < n {
+            kept.push((i, w));
+        } else {
+            let j = rng.random_range(0..=i);
+            if (j as usize) < n {
+                kept[j as usize] = (i, w);
+            }
+        }
+    }
+    kept.sort_by_key(|(i, _)| *i);
+    Ok(kept.into_iter().map(|(_, w)| w).collect())
 }
