@@ -214,11 +214,11 @@ pub fn validation_windows(
 ) -> Result<Vec<Window>, WmError> {
     let spec = Sequences::spec(cfg)?;
     let split = SplitSpec::new(cfg.data.val_fraction, cfg.data.split_seed)?;
-    let mut rng = ChaCha8Rng::seed_from_u64(splitmix64(cfg.data.split_seed ^ 0x7A11_D5E7));
-    let mut kept: Vec<(u64, Window)> = Vec::with_capacity(n.min(4096));
     if n == 0 {
         return Ok(Vec::new());
     }
+    let mut rng = ChaCha8Rng::seed_from_u64(splitmix64(cfg.data.split_seed ^ 0x7A11_D5E7));
+    let mut kept: Vec<(u64, Window)> = Vec::with_capacity(n.min(4096));
     for (i, w) in dataset
         .windows(spec, Some((split, Split::Validation)))
         .enumerate()
