@@ -89,9 +89,10 @@ impl<G: Fn(f64, f64) -> f64> TerrainSource for MapTerrain<G> {
         let mut out = vec![0f32; self.poses.len() * SCAN_DIM];
         for (b, (pose, h)) in self.poses.iter().zip(&self.heights).enumerate() {
             let base = [pose.x, pose.y, (self.ground)(pose.x, pose.y) + h];
+            let yaw = pose.yaw.sin_cos();
             let row = &mut out[b * SCAN_DIM..(b + 1) * SCAN_DIM];
             for (k, v) in row.iter_mut().enumerate() {
-                *v = (scan_height(&self.ground, base, pose.yaw.sin_cos(), k, clip) * scale) as f32;
+                *v = (scan_height(&self.ground, base, yaw, k, clip) * scale) as f32;
             }
         }
         Ok(Tensor::from_slice(&out)
