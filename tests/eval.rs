@@ -81,9 +81,7 @@ fn eval_counts_successes_time_outs_and_completion() {
 #[test]
 fn eval_measures_the_walkers_foot_clearance() {
     // the committed flat walker on two flat lanes (full collisions)
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("models/checkpoints/flat/checkpoints/latest.pt");
-    let ck = Checkpoint::read(&path).unwrap();
+    let ck = Checkpoint::read(&common::walker_path()).unwrap();
     let r = evaluate(&ck, &opts(2)).unwrap();
     assert_eq!(r.success_rate, 1.0);
     // the ankle frame sits a few cm above the sole in stance, and every swing

@@ -7,7 +7,7 @@
 mod common;
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 use common::Scratch;
@@ -17,12 +17,8 @@ use dreampolicy::rl::checkpoint::Checkpoint;
 use dreampolicy::terrain::TerrainKind;
 use serde_json::Value;
 
-fn walker_path() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("models/checkpoints/flat/checkpoints/latest.pt")
-}
-
 fn walker() -> Checkpoint {
-    Checkpoint::read(&walker_path()).unwrap()
+    Checkpoint::read(&common::walker_path()).unwrap()
 }
 
 /// Every message of a play file, by topic: (log time, JSON).
@@ -372,7 +368,7 @@ fn bad_input_is_a_clear_error() {
         assert!(!out.status.success());
         String::from_utf8_lossy(&out.stderr).into_owned()
     };
-    let err = cli(&walker_path(), "stairs");
+    let err = cli(&common::walker_path(), "stairs");
     assert!(
         err.contains("stairs") && err.contains("flat, uneven, stair"),
         "{err}"

@@ -69,22 +69,22 @@ impl<G: Fn(f64, f64) -> f64> MapTerrain<G> {
         &self.poses
     }
 
-    fn rows(&self, t: &Tensor, what: &str, dims: usize) -> Result<usize, WmError> {
+    /// Frames of `t` (`[B, frames, 98]`, one row per pose), or an error naming `what`.
+    fn frames(&self, t: &Tensor, what: &str) -> Result<usize, WmError> {
         let sz = t.size();
-        if sz.len() != dims || sz[0] != self.poses.len() as i64 || sz[dims - 1] != OBS_DIM as i64 {
+        if sz.len() != 3 || sz[0] != self.poses.len() as i64 || sz[2] != OBS_DIM as i64 {
             return Err(WmError::Invalid(format!(
-                "map terrain: {what} must be {}-D [{}, .., {OBS_DIM}], got {sz:?}",
-                dims,
+                "map terrain: {what} must be [{}, frames, {OBS_DIM}], got {sz:?}",
                 self.poses.len()
             )));
         }
-        Ok(if dims == 3 { sz[1] as usize } else { 1 })
+        Ok(sz[1] as usize)
     }
 }
 
 impl<G: Fn(f64, f64) -> f64> TerrainSource for MapTerrain<G> {
     fn scandots(&mut self, states: &Tensor, _call: usize) -> Result<Tensor, WmError> {
-        self.rows(states, "the history", 3)?;
+        self.frames(states, "the history")?;
         let (clip, scale) = (self.obs.scan_clip, self.obs.scales.scan);
         let mut out = vec![0f32; self.poses.len() * SCAN_DIM];
         for (b, (pose, h)) in self.poses.iter().zip(&self.heights).enumerate() {
@@ -101,7 +101,7 @@ impl<G: Fn(f64, f64) -> f64> TerrainSource for MapTerrain<G> {
     }
 
     fn advance(&mut self, predicted: &Tensor) -> Result<(), WmError> {
-        let frames = self.rows(predicted, "the prediction", 3)?;
+        let frames = self.frames(predicted, "the prediction")?;
         let p = predicted
             .to_device(Device::Cpu)
             .to_kind(Kind::Float)

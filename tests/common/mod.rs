@@ -31,6 +31,13 @@ impl Drop for Scratch {
 }
 
 /// Load `configs/<name>` of this checkout with `--set` overrides.
+/// The committed flat walker's checkpoint.
+#[allow(dead_code)]
+pub fn walker_path() -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("models/checkpoints/flat/checkpoints/latest.pt")
+}
+
 pub fn load_config(name: &str, sets: &[&str]) -> dreampolicy::config::ExperimentConfig {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("configs")
