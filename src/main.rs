@@ -113,8 +113,17 @@ enum Command {
         full_collision: bool,
         /// Lane difficulty level (0 = easiest) instead of the config's
         /// `eval.level`.
-        #[arg(long)]
+        #[arg(long, conflicts_with = "levels")]
         level: Option<usize>,
+        /// A level sweep: every checkpoint at each of these levels (`0-9`,
+        /// `0,3,5`) on its terrain (one --terrain for all, or one per
+        /// checkpoint, paired in order). --out writes the JSON, --plot the
+        /// success-rate curves (a line per checkpoint).
+        #[arg(long)]
+        levels: Option<String>,
+        /// The level sweep's PNG (success and completion rate against level).
+        #[arg(long, requires = "levels")]
+        plot: Option<PathBuf>,
         #[arg(long, default_value_t = 0)]
         seed: u64,
         #[arg(long, default_value_t = 2)]
@@ -446,6 +455,8 @@ fn run(cli: Cli) -> Result<()> {
             episodes,
             full_collision,
             level,
+            levels,
+            plot,
             seed,
             threads,
             out,
@@ -457,6 +468,8 @@ fn run(cli: Cli) -> Result<()> {
             episodes,
             full_collision,
             level,
+            levels,
+            plot,
             seed,
             threads,
             out,
@@ -767,11 +780,31 @@ struct EvalArgs {
     episodes: usize,
     full_collision: bool,
     level: Option<usize>,
+    levels: Option<String>,
+    plot: Option<PathBuf>,
     seed: u64,
     threads: usize,
     out: Option<PathBuf>,
     heatmap: Option<PathBuf>,
     json: bool,
+}
+
+impl EvalArgs {
+    /// The options of one evaluation on `kind` lanes at `level`.
+    fn options(
+        &self,
+        kind: dreampolicy::terrain::TerrainKind,
+        level: Option<usize>,
+    ) -> dreampolicy::eval::EvalOptions {
+        dreampolicy::eval::EvalOptions {
+            terrain: kind,
+            episodes: self.episodes,
+            full_collision: self.full_collision,
+            seed: self.seed,
+            threads: self.threads.max(1),
+            level,
+        }
+    }
 }
 
 /// A checkpoint's short name: the run directory of `<run>/checkpoints/<file>.pt`,
@@ -804,28 +837,24 @@ fn eval_cmd(a: EvalArgs) -> Result<()> {
         .map(|p| Checkpoint::read(p))
         .collect::<Result<Vec<_>, _>>()?;
     let names: Vec<String> = a.checkpoints.iter().map(|p| checkpoint_name(p)).collect();
+    if let Some(levels) = &a.levels {
+        return eval_sweep(&a, levels, &kinds, &cks, &names);
+    }
     let mut reports = Vec::with_capacity(cks.len());
     for (ck, name) in cks.iter().zip(&names) {
         let mut row = Vec::with_capacity(kinds.len());
         for &kind in &kinds {
-            let opts = eval::EvalOptions {
-                terrain: kind,
-                episodes: a.episodes,
-                full_collision: a.full_collision,
-                seed: a.seed,
-                threads: a.threads.max(1),
-                level: a.level,
-            };
+            let opts = a.options(kind, a.level);
             let r = eval::evaluate(ck, &opts)
                 .with_context(|| format!("evaluating {name} on {}", kind.name()))?;
             if !a.json {
                 println!(
-                    "{name}: {} lanes of {:.0} m ({}{}): success {:.3}, completion {:.3}, velocity error {:.3} m/s, {} falls, {} time-outs, mean speed {:.2} m/s (commanded {:.2}), ankle {:.3} m at the top of a swing, {:.3} m in stance",
+                    "{name}: {} lanes of {:.0} m ({}{}): success {:.3}, completion {:.3}, velocity error {:.3} m/s, {} falls, {} time-outs, mean speed {:.2} m/s (commanded {:.2}), ankle {:.3} m at the top of a swing, {:.3} m in stance, swing rise {:.3} m",
                     r.episodes, r.lane_length, r.terrain,
                     r.level.map(|l| format!(", level {l}")).unwrap_or_default(),
                     r.success_rate, r.completion_rate,
                     r.vel_tracking_error, r.falls, r.timeouts, r.mean_forward_speed, r.mean_commanded_speed,
-                    r.swing_peak_height, r.stance_foot_height
+                    r.swing_peak_height, r.stance_foot_height, r.swing_rise
                 );
             }
             row.push(r);
@@ -887,6 +916,88 @@ fn eval_cmd(a: EvalArgs) -> Result<()> {
             }
         }
         println!("\nsuccess rate (completion rate):\n{t}");
+    }
+    Ok(())
+}
+
+/// `eval --levels`: each checkpoint on its terrain at each level.
+fn eval_sweep(
+    a: &EvalArgs,
+    levels: &str,
+    kinds: &[dreampolicy::terrain::TerrainKind],
+    cks: &[dreampolicy::rl::checkpoint::Checkpoint],
+    names: &[String],
+) -> Result<()> {
+    use dreampolicy::eval;
+    let levels = eval::parse_levels(levels).map_err(anyhow::Error::msg)?;
+    if kinds.len() != 1 && kinds.len() != cks.len() {
+        anyhow::bail!(
+            "a level sweep takes one --terrain for every checkpoint or one per checkpoint; got {} terrains for {} checkpoints",
+            kinds.len(),
+            cks.len()
+        );
+    }
+    let mut curves = Vec::with_capacity(cks.len());
+    // (legend, success rates, completion rates) of each checkpoint
+    let mut lines: Vec<(String, Vec<f64>, Vec<f64>)> = Vec::with_capacity(cks.len());
+    for (i, (ck, name)) in cks.iter().zip(names).enumerate() {
+        let kind = kinds[i.min(kinds.len() - 1)];
+        let opts = a.options(kind, None);
+        let rs = eval::level_sweep(ck, &opts, &levels)
+            .with_context(|| format!("sweeping {name} over {} levels", kind.name()))?;
+        if !a.json {
+            for r in &rs {
+                println!(
+                    "{name}: {} level {}: success {:.3}, completion {:.3}, {} falls, {} time-outs",
+                    r.terrain,
+                    r.level.unwrap_or_default(),
+                    r.success_rate,
+                    r.completion_rate,
+                    r.falls,
+                    r.timeouts
+                );
+            }
+        }
+        let success: Vec<f64> = rs.iter().map(|r| r.success_rate).collect();
+        let completion: Vec<f64> = rs.iter().map(|r| r.completion_rate).collect();
+        curves.push(serde_json::json!({
+            "checkpoint": name,
+            "terrain": kind.name(),
+            "success_rate": success,
+            "completion_rate": completion,
+            "reports": rs,
+        }));
+        lines.push((format!("{name} on {}", kind.name()), success, completion));
+    }
+    let value = serde_json::json!({
+        "levels": levels,
+        "episodes": a.episodes,
+        "full_collision": a.full_collision,
+        "curves": curves,
+    });
+    if let Some(path) = &a.out {
+        std::fs::write(path, format!("{}\n", serde_json::to_string_pretty(&value)?))
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    if let Some(path) = &a.plot {
+        let x: Vec<f64> = levels.iter().map(|&l| l as f64).collect();
+        let panel = |completion: bool, title: &str| dreampolicy::plot::SeriesPanel {
+            title: title.into(),
+            x_label: "level".into(),
+            x: x.clone(),
+            lines: lines
+                .iter()
+                .map(|(name, s, c)| (name.clone(), if completion { c } else { s }.clone()))
+                .collect(),
+        };
+        dreampolicy::plot::plot_series(
+            path,
+            &format!("Level sweep: {} lanes of 10 m per level", a.episodes),
+            &[panel(false, "success rate"), panel(true, "completion rate")],
+        )?;
+    }
+    if a.json {
+        println!("{}", serde_json::to_string(&value)?);
     }
     Ok(())
 }

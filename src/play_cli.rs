@@ -26,7 +26,9 @@ pub struct PlayArgs {
     /// Commanded forward speed in m/s (default: the middle of the config's eval.lin_vel_x).
     #[arg(long, allow_negative_numbers = true)]
     speed: Option<f64>,
-    /// Curriculum level of the lane (default: the config's eval.level).
+    /// Level of the lane in the config's eval.terrain, the table `eval` scores
+    /// (the paper's unless the config says otherwise; default: eval.level).
+    /// With --seed k the lane is eval's k-th lane at that level.
     #[arg(long)]
     level: Option<usize>,
     #[arg(long, default_value_t = 0)]
@@ -67,9 +69,10 @@ pub fn run(a: PlayArgs) -> Result<()> {
         play::Ending::BlowUp => format!("physics blew up at {:.2} s", s.seconds),
         play::Ending::LeftMap => format!("walked off the map at {:.2} s", s.seconds),
     };
-    let lane = match (s.level, s.lane_length, s.reached_goal) {
-        (Some(l), Some(len), Some(goal)) => format!(
-            ", level {l}, {len:.1} m lane{}",
+    let lane = match (s.level, &s.table, s.lane_length, s.reached_goal) {
+        (Some(l), Some(table), Some(len), Some(goal)) => format!(
+            ", level {l} of {table} (eval's lane {}), {len:.1} m lane{}",
+            s.seed,
             if goal { ", goal reached" } else { "" }
         ),
         _ => String::new(),

@@ -92,8 +92,83 @@ fn eval_measures_the_walkers_foot_clearance() {
         top > stance + 0.01 && top < 0.2,
         "swing top {top}, stance {stance}"
     );
+    // on a plane the rise over the take-off point is the clearance over the ground
+    let rise = r.swing_rise;
+    assert!(
+        (rise - (top - stance)).abs() < 0.01,
+        "rise {rise}, top {top}, stance {stance}"
+    );
     let json = serde_json::to_value(&r).unwrap();
     assert!(json["swing_peak_height"].as_f64().is_some());
+}
+
+#[test]
+fn foot_clearance_over_a_gap_is_measured_against_the_platforms() {
+    // before: over a pit the ground under the foot was the pit's floor, and the
+    // walker's swing_peak_height read 0.8-0.97 m on gap lanes
+    let ck = Checkpoint::read(&common::walker_path()).unwrap();
+    let o = EvalOptions {
+        terrain: TerrainKind::Gap,
+        level: Some(0),
+        ..opts(2)
+    };
+    let r = evaluate(&ck, &o).unwrap();
+    let (top, stance, rise) = (r.swing_peak_height, r.stance_foot_height, r.swing_rise);
+    assert!(top.is_nan() || top < 0.3, "swing top {top} over gaps");
+    assert!(stance < 0.2, "stance {stance}");
+    assert!(rise.is_nan() || rise < 0.3, "swing rise {rise}");
+}
+
+#[test]
+fn level_list_parses() {
+    use dreampolicy::eval::parse_levels;
+    assert_eq!(parse_levels("0-9").unwrap(), (0..=9).collect::<Vec<_>>());
+    assert_eq!(parse_levels("5,0,3-4,3").unwrap(), vec![0, 3, 4, 5]);
+    for bad in ["", "a-3", "4-2", "1,x"] {
+        let e = parse_levels(bad).unwrap_err();
+        assert!(e.contains("--levels"), "{bad}: {e}");
+    }
+}
+
+#[test]
+fn eval_cli_sweeps_levels_into_a_json_and_a_plot() {
+    let dir = Scratch::new("eval-sweep");
+    // a 1 mm lane: every episode ends on its first step, at any level
+    let ck = tiny_checkpoint(&dir, &["eval.lane_length=0.001", "eval.n_envs=2"]);
+    let (json, png) = (dir.0.join("sweep.json"), dir.0.join("sweep.png"));
+    let text = common::run_ok(
+        bin()
+            .args(["eval", "--checkpoint"])
+            .arg(&ck.path)
+            .args(["--terrain", "stair", "--levels", "0-2,9", "--episodes", "2"])
+            .args(["--threads", "1", "--out"])
+            .arg(&json)
+            .arg("--plot")
+            .arg(&png),
+    );
+    assert!(text.contains("stair level 9: success 1.000"), "{text}");
+    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    assert_eq!(v["levels"], serde_json::json!([0, 1, 2, 9]));
+    let curve = &v["curves"][0];
+    assert_eq!(curve["terrain"], "stair");
+    assert_eq!(
+        curve["success_rate"],
+        serde_json::json!([1.0, 1.0, 1.0, 1.0])
+    );
+    assert_eq!(curve["reports"][3]["level"], 9);
+    assert!(std::fs::metadata(&png).unwrap().len() > 1000);
+
+    // flat lanes have no levels; two terrains for one checkpoint do not pair
+    for (terrains, want) in [("flat", "flat lanes"), ("stair,gap", "one per checkpoint")] {
+        let out = bin()
+            .args(["eval", "--checkpoint"])
+            .arg(&ck.path)
+            .args(["--terrain", terrains, "--levels", "0-1", "--episodes", "1"])
+            .output()
+            .unwrap();
+        let e = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && e.contains(want), "{e}");
+    }
 }
 
 #[test]

@@ -282,6 +282,7 @@ fn play_on_an_uneven_lane_draws_its_heightfield() {
     o.full_collision = true;
     let s = play(&ck, &o).unwrap();
     assert_eq!((s.level, s.lane_length), (Some(1), Some(10.0)));
+    assert_eq!(s.table.as_deref(), Some("the paper's table"));
     assert!(s.full_collision);
     assert!(matches!(s.ending, Ending::TimeUp | Ending::Fell), "{s:?}");
     assert_eq!(s.fell, s.ending == Ending::Fell);
@@ -335,6 +336,35 @@ fn play_on_an_uneven_lane_draws_its_heightfield() {
     let first = &p.messages["/state"][0].1;
     assert!(f(first, "base_height") > 0.7);
     assert!(f(first, "x") > 5.0, "spawned inside the map's border");
+}
+
+#[test]
+fn play_draws_the_lane_that_eval_scores() {
+    // a stair specialist trained on 3 cm risers at level 0: play's level-0 lane is
+    // eval's (the paper's 15 cm risers), not the training curriculum's
+    let dir = Scratch::new("play-evallane");
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("models/checkpoints/stair/checkpoints/latest.pt");
+    let ck = Checkpoint::read(&path).unwrap();
+    let cfg = ck.config().unwrap();
+    assert!(cfg.env.terrain.map != cfg.eval.terrain);
+    let mut o = PlayOptions::new(TerrainKind::Stair, dir.0.join("stair.mcap"));
+    (o.seconds, o.level, o.seed) = (0.2, Some(0), 4);
+    let s = play(&ck, &o).unwrap();
+    let lane = dreampolicy::eval::eval_lane(&cfg, TerrainKind::Stair, 0, 4).unwrap();
+    assert_eq!(s.lane_length, Some(lane.length()));
+    let p = read(&o.out);
+    let points = p.messages["/terrain"][0].1["entities"][0]["triangles"][0]["points"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|q| f(q, "z"))
+        .fold(f64::MIN, f64::max);
+    let [lo, hi] = lane.map().height_range();
+    assert!(
+        (points - hi).abs() < 1e-3 && hi - lo > 0.1,
+        "drawn top {points}, lane {lo}..{hi}"
+    );
 }
 
 #[test]

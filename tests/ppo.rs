@@ -335,6 +335,29 @@ fn walker_transfers_into_a_scan_encoder_policy_acting_the_same() {
         "{log}"
     );
 
+    // train.init_std resets the copied std, so that a fine-tune explores again
+    let mut explore = spec_cfg.clone();
+    explore.train.init_std = Some(0.9);
+    let run = runner::train(&explore, &dir.0.join("explore"), false, true).unwrap();
+    let mut agent = Agent::new(&explore.policy, env.dims(), n, true);
+    Checkpoint::read(&run.checkpoint)
+        .unwrap()
+        .load_agent(&mut agent)
+        .unwrap();
+    let std = agent.policy.std().mean(tch::Kind::Float).double_value(&[]);
+    assert!(
+        (std - 0.9).abs() < 0.05,
+        "std {std} after one iteration from 0.9"
+    );
+    let mut bad = spec_cfg.clone();
+    bad.train.init_checkpoint = None;
+    bad.train.init_std = Some(0.9);
+    assert!(bad
+        .validate()
+        .unwrap_err()
+        .to_string()
+        .contains("train.init_std"));
+
     // other architecture changes are refused, naming the tensor
     let wide = load_config("test/g1_tiny.yaml", &["policy.actor_hidden=[48,32]"]);
     let mut agent = Agent::new(&wide.policy, env.dims(), n, true);

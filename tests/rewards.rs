@@ -218,3 +218,68 @@ fn curriculum_moves_levels() {
         .collect();
     assert_eq!(seen.len(), 10);
 }
+
+/// The peers' foot-lifting terms (issue 16's stepping foundation), by hand.
+#[test]
+fn foot_lifting_terms_by_hand() {
+    let p = RewardParams::default();
+    let mut s = state();
+    s.command = [0.8, 0.0, 0.0];
+    // biped air time: exactly one foot down; the shorter of the two mode times, capped
+    s.feet_contact = [true, false];
+    s.feet_contact_time = [0.25, 0.0];
+    s.feet_air_time = [0.0, 0.15];
+    close(term("feet_air_time_biped", &s), 0.15);
+    s.feet_air_time = [0.0, 0.9];
+    close(term("feet_air_time_biped", &s), 0.25);
+    s.feet_contact_time = [0.9, 0.0];
+    close(term("feet_air_time_biped", &s), p.feet_air_time_threshold);
+    s.feet_contact = [true, true];
+    close(term("feet_air_time_biped", &s), 0.0);
+    s.feet_contact = [false, true];
+    s.command = [0.05, 0.0, 0.0];
+    close(term("feet_air_time_biped", &s), 0.0);
+
+    // velocity-weighted clearance: a still foot costs nothing at any height
+    s.feet_ground = [0.1, 0.1];
+    s.feet_pos = [[0.0, 0.1, 0.136], [0.0, -0.1, 0.13]];
+    s.feet_vel = [[0.0; 3], [0.0; 3]];
+    close(term("foot_clearance", &s), 1.0);
+    s.feet_vel[1] = [1.0, 0.0, 0.5];
+    let err = 2f64.tanh() * (0.03f64 - p.foot_clearance_target).powi(2);
+    close(term("foot_clearance", &s), (-err / p.clearance_sigma).exp());
+    s.feet_pos[1][2] = 0.1 + p.foot_clearance_target;
+    close(term("foot_clearance", &s), 1.0);
+
+    // clock target: zero in the clock's stance, a sine over the swing
+    let (r, h, a) = (
+        p.gait_stance_ratio,
+        p.swing_clock_height,
+        p.ankle_stance_height,
+    );
+    use dreampolicy::env::rewards::swing_clock_target;
+    assert_eq!(swing_clock_target(0.1, 0, &p), None);
+    let mid = r + (1.0 - r) / 2.0;
+    close(swing_clock_target(mid, 0, &p).unwrap(), a + h);
+    close(swing_clock_target(r, 0, &p).unwrap(), a);
+    // the right leg is half a period later
+    close(swing_clock_target(mid - 0.5, 1, &p).unwrap(), a + h);
+    s.gait_phase = mid;
+    s.feet_ground = [0.0, 0.0];
+    s.feet_pos[0][2] = a; // left foot kept down in its swing: pays h^2
+    s.feet_pos[1][2] = a; // right leg in stance by the clock: free
+    s.feet_contact = [true, true];
+    close(term("feet_swing_clock", &s), h * h);
+    s.feet_pos[0][2] = a + h;
+    close(term("feet_swing_clock", &s), 0.0);
+
+    // standing still while commanded to move
+    s.command = [0.8, 0.0, 0.0];
+    s.base_lin_vel = [0.1, 0.0, 0.0];
+    close(term("stand_still", &s), 1.0);
+    s.base_lin_vel = [0.3, 0.0, 0.0];
+    close(term("stand_still", &s), 0.0);
+    s.base_lin_vel = [0.0, 0.0, 0.0];
+    s.command = [0.1, 0.1, 0.0];
+    close(term("stand_still", &s), 0.0);
+}

@@ -421,6 +421,15 @@ pub struct RewardParams {
     pub swing_height_target: f64,
     /// Width of the `upright` kernel.
     pub upright_sigma: f64,
+    /// Cap (s) of the single-support time that `feet_air_time_biped` pays.
+    pub feet_air_time_threshold: f64,
+    /// Width of the `foot_clearance` kernel (m^2 s^-0; Isaac Lab's Spot: 0.05).
+    pub clearance_sigma: f64,
+    /// Ankle height above the ground in stance (m): the base of `feet_swing_clock`'s
+    /// target (the G1's ankle sits 0.036 m above the sole, `eval`'s stance_foot_height).
+    pub ankle_stance_height: f64,
+    /// Sole clearance at mid-swing that `feet_swing_clock` asks for (m).
+    pub swing_clock_height: f64,
 }
 
 impl Default for RewardParams {
@@ -436,6 +445,10 @@ impl Default for RewardParams {
             gait_stance_ratio: 0.55,
             swing_height_target: 0.08,
             upright_sigma: 0.2,
+            feet_air_time_threshold: 0.4,
+            clearance_sigma: 0.05,
+            ankle_stance_height: 0.036,
+            swing_clock_height: 0.10,
         }
     }
 }

@@ -179,6 +179,9 @@ pub struct TrainConfig {
     pub torch_threads: i64,
     /// Start from this checkpoint's networks and normalizer (a specialist from the walker).
     pub init_checkpoint: Option<String>,
+    /// With `init_checkpoint`: set the action std to this instead of the
+    /// checkpoint's, so that a fine-tune explores again (a gait to change).
+    pub init_std: Option<f64>,
     /// Stop early when the mean episode return stays NaN or the loss is NaN.
     pub stop_on_nan: bool,
 }
@@ -192,6 +195,7 @@ impl Default for TrainConfig {
             seed: 1,
             torch_threads: 1,
             init_checkpoint: None,
+            init_std: None,
             stop_on_nan: true,
         }
     }
@@ -298,6 +302,13 @@ impl TrainConfig {
                 "train.torch_threads must be positive, got {}",
                 self.torch_threads
             )));
+        }
+        if let Some(std) = self.init_std {
+            if !(std.is_finite() && std > 0.0) || self.init_checkpoint.is_none() {
+                return Err(ConfigError::Invalid(format!(
+                    "train.init_std must be positive and needs train.init_checkpoint, got {std}"
+                )));
+            }
         }
         Ok(())
     }

@@ -240,6 +240,7 @@ impl LocoEnv {
         self.state.last_action = [0.0; NUM_JOINTS];
         self.state.last_last_action = [0.0; NUM_JOINTS];
         self.state.feet_air_time = [0.0; 2];
+        self.state.feet_contact_time = [0.0; 2];
         self.state.terrain_level = self.level;
         self.resample_command(sh);
         self.derive_state(sh);
@@ -495,6 +496,11 @@ impl LocoEnv {
                 0.0
             } else {
                 s.feet_air_time[k] + s.dt
+            };
+            s.feet_contact_time[k] = if contact {
+                s.feet_contact_time[k] + s.dt
+            } else {
+                0.0
             };
             s.feet_contact[k] = contact;
         }

@@ -62,6 +62,10 @@ terms! {
     contact_no_vel: "sum over feet in contact of |v_foot|^2 (slipping)";
     upper_pose: "sum((q - q_default)^2) over the waist and arm joints";
     upright: "exp(-(g_x^2 + g_y^2) / upright_sigma): a bounded, positive orientation term (mjlab's upright)";
+    feet_air_time_biped: "while exactly one foot is in contact and |v_cmd| > 0.1: min(time both feet have spent in their current mode, feet_air_time_threshold) (Isaac Lab's G1 feet_air_time_positive_biped)";
+    foot_clearance: "exp(-sum_feet tanh(2 |v_xy(foot)|) (z_foot - ground - foot_clearance_target)^2 / clearance_sigma): only a foot that moves is asked to be high (Isaac Lab's velocity-weighted clearance)";
+    stand_still: "1 while a planar command of |v_cmd| > 0.2 m/s is given and the base moves along it at less than a quarter of it: standing in front of an obstacle must not pay";
+    feet_swing_clock: "sum over legs in the gait clock's swing phase of (z_foot - ground - ankle_stance_height - swing_clock_height sin(pi s))^2, s in [0, 1] the swing's progress (walk-these-ways' clock target: a foot kept down in swing pays)";
 }
 
 /// The term with this name.
@@ -309,6 +313,60 @@ fn upper_pose(s: &EnvState, _: &RewardParams) -> f64 {
 
 fn upright(s: &EnvState, p: &RewardParams) -> f64 {
     (-(sq(s.gravity[0]) + sq(s.gravity[1])) / p.upright_sigma).exp()
+}
+
+fn feet_air_time_biped(s: &EnvState, p: &RewardParams) -> f64 {
+    if s.command[0].hypot(s.command[1]) <= 0.1 || s.feet_contact[0] == s.feet_contact[1] {
+        return 0.0;
+    }
+    let mode_time = |k: usize| {
+        if s.feet_contact[k] {
+            s.feet_contact_time[k]
+        } else {
+            s.feet_air_time[k]
+        }
+    };
+    mode_time(0)
+        .min(mode_time(1))
+        .min(p.feet_air_time_threshold)
+}
+
+fn foot_clearance(s: &EnvState, p: &RewardParams) -> f64 {
+    let err: f64 = (0..2)
+        .map(|k| {
+            let speed = s.feet_vel[k][0].hypot(s.feet_vel[k][1]);
+            (2.0 * speed).tanh() * sq(s.feet_pos[k][2] - s.feet_ground[k] - p.foot_clearance_target)
+        })
+        .sum();
+    (-err / p.clearance_sigma).exp()
+}
+
+/// The clock's swing-height target of leg `k` at gait clock `phase` (ankle
+/// height above the ground), or None while the clock has the leg in stance.
+pub fn swing_clock_target(phase: f64, k: usize, p: &RewardParams) -> Option<f64> {
+    let leg = (phase + 0.5 * k as f64).fract();
+    (leg >= p.gait_stance_ratio).then(|| {
+        let progress = (leg - p.gait_stance_ratio) / (1.0 - p.gait_stance_ratio);
+        p.ankle_stance_height + p.swing_clock_height * (std::f64::consts::PI * progress).sin()
+    })
+}
+
+fn feet_swing_clock(s: &EnvState, p: &RewardParams) -> f64 {
+    (0..2)
+        .filter_map(|k| {
+            swing_clock_target(s.gait_phase, k, p)
+                .map(|z| sq(s.feet_pos[k][2] - s.feet_ground[k] - z))
+        })
+        .sum()
+}
+
+fn stand_still(s: &EnvState, _: &RewardParams) -> f64 {
+    let cmd = s.command[0].hypot(s.command[1]);
+    if cmd <= 0.2 {
+        return 0.0;
+    }
+    let along = (s.base_lin_vel[0] * s.command[0] + s.base_lin_vel[1] * s.command[1]) / cmd;
+    (along < 0.25 * cmd) as u8 as f64
 }
 
 /// The configured terms resolved to functions once, with per-term episode sums.

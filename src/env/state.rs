@@ -47,6 +47,8 @@ pub struct EnvState {
     pub feet_contact: [bool; 2],
     /// Time since each foot left the ground (reset at touchdown).
     pub feet_air_time: [f64; 2],
+    /// Time since each foot touched down (reset at lift-off).
+    pub feet_contact_time: [f64; 2],
     /// Air time at the moment of touchdown this step (0 if no touchdown).
     pub feet_touchdown_air_time: [f64; 2],
     pub feet_first_contact: [bool; 2],

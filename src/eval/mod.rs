@@ -16,7 +16,7 @@ use std::sync::Arc;
 use crate::env::{Scene, VecEnv};
 use crate::rl::checkpoint::Checkpoint;
 use crate::rl::{Agent, RlError, VecTask};
-use crate::terrain::{TerrainKind, TerrainMap};
+use crate::terrain::{Lane, TerrainKind, TerrainMap};
 
 /// What an evaluation measured.
 #[derive(Debug, Clone, Serialize)]
@@ -32,15 +32,26 @@ pub struct EvalReport {
     /// Mean forward speed along the lane over all episodes (m/s).
     pub mean_forward_speed: f64,
     pub mean_commanded_speed: f64,
-    /// The gait's foot clearance: ankle height above the ground under it at the
-    /// top of each swing (a foot's highest point between lift-off and
-    /// touchdown, over swings of at least [`MIN_SWING_STEPS`] control steps),
-    /// averaged over the swings of both feet (m; NaN without one).
+    /// The gait's foot clearance: ankle height at the top of each swing (a
+    /// foot's highest point between lift-off and touchdown, over swings of at
+    /// least [`MIN_SWING_STEPS`] control steps) above the ground it stepped
+    /// over, the higher of the ground at lift-off and at touchdown (a step up
+    /// is measured against the upper tread), averaged over the swings of both
+    /// feet (m; NaN without one). A swing whose lift-off or touchdown has the
+    /// ankle more than [`OVER_GROUND`] above the ground under it (the ankle
+    /// hangs over a pit or an edge, so the ground under it is not what the
+    /// foot stands on) is left out.
     pub swing_peak_height: f64,
     /// Mean ankle height above the ground while a foot is in contact (m): the
     /// sole's offset, so that `swing_peak_height - stance_foot_height` is the
-    /// clearance of the sole.
+    /// clearance of the sole (contacts with the ankle over a pit left out).
     pub stance_foot_height: f64,
+    /// The sole's rise at the top of each swing above where it took off and
+    /// landed: ankle z at the top - the higher of the ankle's lowest z in the
+    /// stance before (flat foot) and its z at touchdown (m, over the same swings; no ground lookup, so it means the
+    /// same on every terrain; on a plane about `swing_peak_height -
+    /// stance_foot_height`).
+    pub swing_rise: f64,
     pub lane_length: f64,
     /// Curriculum level of the lanes (None for flat lanes, which are the plane).
     pub level: Option<usize>,
@@ -55,6 +66,11 @@ pub struct EvalReport {
 /// Shorter flights of a foot (a contact lost for a step or two while it
 /// slides or bounces) are not swings for `swing_peak_height`.
 pub const MIN_SWING_STEPS: u32 = 5;
+
+/// An ankle this far above the ground under it in contact is over a pit or an
+/// edge (in stance it sits ~0.04 m above the sole): `swing_peak_height` and
+/// `stance_foot_height` leave such contacts out.
+pub const OVER_GROUND: f64 = 0.2;
 
 /// How to evaluate.
 #[derive(Debug, Clone)]
@@ -122,29 +138,10 @@ pub fn evaluate(ck: &Checkpoint, o: &EvalOptions) -> Result<EvalReport, RlError>
         let mut env = VecEnv::new(&env_cfg)?;
         run_episodes(ck, &cfg, &mut env, o.episodes, length, &mut t)?;
     } else {
-        let map_cfg = &cfg.eval.terrain;
-        if level > map_cfg.max_level() {
-            return Err(RlError::Invalid(format!(
-                "level {level} is above eval.terrain's top level {}",
-                map_cfg.max_level()
-            )));
-        }
         let lanes = cfg.eval.lanes.clamp(1, o.episodes);
         for k in 0..lanes {
             let count = o.episodes / lanes + usize::from(k < o.episodes % lanes);
-            let lane = TerrainMap::lane(
-                map_cfg,
-                o.terrain,
-                level,
-                // the terrain is drawn over at least 1 m; success is still
-                // measured at `eval.lane_length`
-                length.max(crate::terrain::lane::MIN_SEGMENT_LENGTH),
-                map_cfg.tile_width,
-                o.seed.wrapping_add(k as u64),
-            )
-            .map_err(|e| {
-                RlError::Invalid(format!("building the {} lane: {e}", o.terrain.name()))
-            })?;
+            let lane = eval_lane(&cfg, o.terrain, level, o.seed.wrapping_add(k as u64))?;
             let mut lane_cfg = env_cfg.clone();
             lane_cfg.n_envs = env_cfg.n_envs.min(count as i64);
             lane_cfg.seed = o.seed.wrapping_add(1000 * k as u64);
@@ -170,6 +167,7 @@ pub fn evaluate(ck: &Checkpoint, o: &EvalOptions) -> Result<EvalReport, RlError>
         mean_commanded_speed: t.cmd_sum / d,
         swing_peak_height: t.swing_sum / t.swings as f64,
         stance_foot_height: t.stance_sum / t.stance_n as f64,
+        swing_rise: t.rise_sum / t.rises as f64,
         lane_length: length,
         level: (o.terrain != TerrainKind::Flat).then_some(level),
         full_collision: o.full_collision,
@@ -179,6 +177,48 @@ pub fn evaluate(ck: &Checkpoint, o: &EvalOptions) -> Result<EvalReport, RlError>
         mujoco_version: crate::sim::mujoco_version(),
         seed: o.seed,
     })
+}
+
+/// The lane `evaluate` walks for lane seed `seed` at `level` of the config's
+/// `eval.terrain` (lane `k` of an evaluation has seed `o.seed + k`): `play`
+/// draws the same lanes, so that the rollout a person watches is a scored one.
+/// The terrain is drawn over at least 1 m; success is measured at
+/// `eval.lane_length`.
+pub fn eval_lane(
+    cfg: &ExperimentConfig,
+    kind: TerrainKind,
+    level: usize,
+    seed: u64,
+) -> Result<Lane, RlError> {
+    let map_cfg = &cfg.eval.terrain;
+    if level > map_cfg.max_level() {
+        return Err(RlError::Invalid(format!(
+            "level {level} is above {}'s top level {}",
+            eval_table_name(cfg),
+            map_cfg.max_level()
+        )));
+    }
+    TerrainMap::lane(
+        map_cfg,
+        kind,
+        level,
+        cfg.eval
+            .lane_length
+            .max(crate::terrain::lane::MIN_SEGMENT_LENGTH),
+        map_cfg.tile_width,
+        seed,
+    )
+    .map_err(|e| RlError::Invalid(format!("building the {} lane: {e}", kind.name())))
+}
+
+/// What `eval.terrain` is, in words: "the paper's table" when the config keeps
+/// the default, else "the config's eval.terrain".
+pub fn eval_table_name(cfg: &ExperimentConfig) -> &'static str {
+    if cfg.eval.terrain == crate::terrain::TerrainConfig::default() {
+        "the paper's table"
+    } else {
+        "the config's eval.terrain"
+    }
 }
 
 /// Run `episodes` counted episodes of the checkpoint's deterministic policy on
@@ -204,8 +244,7 @@ fn run_episodes(
     let mut started = n.min(episodes);
     let mut counted: Vec<bool> = (0..n).map(|i| i < started).collect();
     let (mut steps, mut speed) = (vec![0u64; n], vec![0.0f64; n]);
-    // each foot's highest point and steps in its current swing (None: in contact)
-    let mut peak = vec![[None::<(f64, u32)>; 2]; n];
+    let mut peak = vec![[Swing::default(); 2]; n];
     while t.done < target {
         agent.step_mean(env);
         for i in 0..n {
@@ -252,7 +291,7 @@ fn run_episodes(
             started += counted[i] as usize;
             steps[i] = 0;
             speed[i] = 0.0;
-            peak[i] = [None; 2];
+            peak[i] = [Swing::default(); 2];
             if end == Ending::Success {
                 env.reset_env(i);
                 agent.reset_history_env(i, env.obs());
@@ -267,6 +306,17 @@ enum Ending {
     Success,
     Fall,
     Timeout,
+}
+
+/// One foot's current swing in an evaluation.
+#[derive(Debug, Clone, Copy, Default)]
+struct Swing {
+    /// Highest ankle z (world) and steps of the swing in progress (None in contact).
+    peak: Option<(f64, u32)>,
+    /// The foot's last stance: its lowest ankle z (the flat foot, before the
+    /// heel lifts) and the ground under the foot at lift-off (None before the
+    /// first: a swing the episode starts in is not counted).
+    lift: Option<(f64, f64)>,
 }
 
 /// Running sums of an evaluation.
@@ -285,25 +335,40 @@ struct Tally {
     swings: u64,
     stance_sum: f64,
     stance_n: u64,
+    rise_sum: f64,
+    rises: u64,
 }
 
 impl Tally {
     /// One step of the feet: a swing's peak is counted at its touchdown.
-    fn feet(&mut self, s: &crate::env::state::EnvState, peak: &mut [Option<(f64, u32)>; 2]) {
-        for (k, p) in peak.iter_mut().enumerate() {
-            let h = s.feet_pos[k][2] - s.feet_ground[k];
-            if s.feet_contact[k] {
-                self.stance_sum += h;
+    fn feet(&mut self, s: &crate::env::state::EnvState, swing: &mut [Swing; 2]) {
+        for (k, w) in swing.iter_mut().enumerate() {
+            let (z, ground) = (s.feet_pos[k][2], s.feet_ground[k]);
+            if !s.feet_contact[k] {
+                w.peak = Some(w.peak.map_or((z, 1), |(top, n)| (top.max(z), n + 1)));
+                continue;
+            }
+            let grounded = z - ground <= OVER_GROUND;
+            if grounded {
+                self.stance_sum += z - ground;
                 self.stance_n += 1;
-                if let Some((top, n)) = p.take() {
-                    if n >= MIN_SWING_STEPS {
-                        self.swing_sum += top;
+            }
+            let landed = w.peak.take();
+            if let (Some((top, steps)), Some((lift_z, lift_ground))) = (landed, w.lift) {
+                if steps >= MIN_SWING_STEPS {
+                    self.rise_sum += top - lift_z.max(z);
+                    self.rises += 1;
+                    if grounded && lift_z - lift_ground <= OVER_GROUND {
+                        self.swing_sum += top - lift_ground.max(ground);
                         self.swings += 1;
                     }
                 }
-            } else {
-                *p = Some(p.map_or((h, 1), |(top, n)| (top.max(h), n + 1)));
             }
+            // a new stance starts at touchdown; the lowest ankle z of a stance
+            w.lift = Some(match (landed, w.lift) {
+                (None, Some((low, _))) => (low.min(z), ground),
+                _ => (z, ground),
+            });
         }
     }
 
@@ -318,4 +383,58 @@ impl Tally {
         self.fwd_sum += speed;
         self.cmd_sum += cmd;
     }
+}
+
+/// Parse a level list: `0-9` (inclusive range), `0,2,5`, or a mix (`0-3,7`).
+pub fn parse_levels(text: &str) -> Result<Vec<usize>, String> {
+    let num = |s: &str| {
+        s.trim()
+            .parse::<usize>()
+            .map_err(|_| format!("'{}' in --levels is not a level (0, 1, ...)", s.trim()))
+    };
+    let mut levels = Vec::new();
+    for part in text.split(',').filter(|p| !p.trim().is_empty()) {
+        match part.split_once('-') {
+            Some((a, b)) => {
+                let (a, b) = (num(a)?, num(b)?);
+                if a > b {
+                    return Err(format!("--levels range {a}-{b} runs backwards"));
+                }
+                levels.extend(a..=b);
+            }
+            None => levels.push(num(part)?),
+        }
+    }
+    if levels.is_empty() {
+        return Err("--levels is empty; give e.g. 0-9 or 0,3,5".into());
+    }
+    levels.sort_unstable();
+    levels.dedup();
+    Ok(levels)
+}
+
+/// One checkpoint's evaluation at each of `levels` on its terrain (`o.level`
+/// is replaced by each level in turn): the level sweep of a specialist.
+pub fn level_sweep(
+    ck: &Checkpoint,
+    o: &EvalOptions,
+    levels: &[usize],
+) -> Result<Vec<EvalReport>, RlError> {
+    if o.terrain == TerrainKind::Flat {
+        return Err(RlError::Invalid(
+            "a level sweep needs a terrain with levels; flat lanes are the plane".into(),
+        ));
+    }
+    levels
+        .iter()
+        .map(|&level| {
+            evaluate(
+                ck,
+                &EvalOptions {
+                    level: Some(level),
+                    ..o.clone()
+                },
+            )
+        })
+        .collect()
 }

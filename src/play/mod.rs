@@ -6,7 +6,8 @@
 //! along the lane, the checkpoint's training scene or with `full_collision` the
 //! project's default one), with one env, a fixed commanded forward speed and
 //! no time-out inside the rollout. A flat lane is a plane; any other kind is
-//! [`TerrainMap::lane`] at the config's `eval.level`, compiled into the scene.
+//! `eval`'s lane (`eval::eval_lane`: the config's `eval.terrain`, the paper's table
+//! by default, at `eval.level` or `--level`), compiled into the scene.
 //! The rollout stops after `seconds`, at a fall (or a physics blow-up), or when
 //! the robot walks off the lane's map.
 //!
@@ -33,7 +34,7 @@ use crate::config::{
 use crate::env::{EnvError, Scene, VecEnv};
 use crate::rl::checkpoint::Checkpoint;
 use crate::rl::{Agent, RlError, VecTask};
-use crate::terrain::{TerrainError, TerrainKind, TerrainMap};
+use crate::terrain::{TerrainError, TerrainKind};
 use file::{PlayFile, Topic};
 use foxglove::{FrameTransform, FrameTransforms, Quaternion, SceneUpdate, Time, Vector3};
 use scene::{round5, round6, WORLD};
@@ -135,6 +136,9 @@ pub struct PlaySummary {
     pub terrain: String,
     /// Lane level (None on a plane).
     pub level: Option<usize>,
+    /// The table the lane was drawn from: "the paper's table" (`eval.terrain`'s
+    /// default) or "the config's eval.terrain"; None on a plane.
+    pub table: Option<String>,
     /// Spawn to goal line of the lane (m; None on a plane).
     pub lane_length: Option<f64>,
     pub commanded_speed: f64,
@@ -220,14 +224,7 @@ pub fn play(ck: &Checkpoint, o: &PlayOptions) -> Result<PlaySummary, PlayError> 
     let level = o.level.unwrap_or(cfg.eval.level);
     let lane = match o.terrain {
         TerrainKind::Flat => None,
-        kind => Some(TerrainMap::lane(
-            &env_cfg.terrain.map,
-            kind,
-            level,
-            cfg.eval.lane_length.max(kind.default_lane_length()),
-            env_cfg.terrain.map.tile_width,
-            o.seed,
-        )?),
+        kind => Some(crate::eval::eval_lane(&cfg, kind, level, o.seed)?),
     };
     let scene = Scene::with_terrain(&env_cfg, lane.as_ref().map(|l| Arc::new(l.map().clone())))?;
     let mut env = VecEnv::with_scene(&env_cfg, scene)?;
@@ -338,6 +335,9 @@ pub fn play(ck: &Checkpoint, o: &PlayOptions) -> Result<PlaySummary, PlayError> 
         out: o.out.display().to_string(),
         terrain: o.terrain.name().to_string(),
         level: lane.as_ref().map(|_| level),
+        table: lane
+            .as_ref()
+            .map(|_| crate::eval::eval_table_name(&cfg).to_string()),
         lane_length,
         commanded_speed: speed,
         steps,

@@ -201,6 +201,13 @@ impl ActorCritic {
         self.critic.forward(&x).squeeze_dim(1)
     }
 
+    /// Set every action dimension's standard deviation to `std`.
+    pub fn set_std(&mut self, std: f64) {
+        tch::no_grad(|| {
+            let _ = self.log_std.fill_(std.ln());
+        });
+    }
+
     /// Action standard deviation `[action]`, bounded below by `min_std`.
     pub fn std(&self) -> Tensor {
         self.log_std.exp().clamp_min(self.cfg.min_std)

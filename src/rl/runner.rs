@@ -139,6 +139,9 @@ impl<'a, T: VecTask> Trainer<'a, T> {
         let mut transfer = None;
         if let Some(ck) = &init {
             transfer = Some(ck.transfer_agent(&mut agent)?);
+            if let Some(std) = cfg.train.init_std {
+                agent.policy.set_std(std);
+            }
         }
         let mirror = task.mirror();
         if cfg.ppo.symmetry && mirror.is_none() {
@@ -418,6 +421,9 @@ pub fn learn<T: VecTask>(
     ))?;
     if let (Some(t), Some(path)) = (&tr.transfer, &cfg.train.init_checkpoint) {
         run.log(&format!("initialized from {path}: {t}"))?;
+        if let Some(std) = cfg.train.init_std {
+            run.log(&format!("action std set to {std} (train.init_std)"))?;
+        }
     }
     let mut last = (f64::NAN, f64::NAN);
     while tr.iteration < total {

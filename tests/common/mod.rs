@@ -91,3 +91,15 @@ pub fn write_synthetic_shard(
     }
     w.finish().unwrap();
 }
+
+/// Run a command to success (else fail with its stderr) and return its stdout.
+#[allow(dead_code)]
+pub fn run_ok(cmd: &mut std::process::Command) -> String {
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
