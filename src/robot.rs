@@ -124,6 +124,11 @@ pub const FOOT_SITES: [&str; 2] = ["left_foot", "right_foot"];
 pub const IMU_SITE: &str = "imu_in_pelvis";
 /// Indices (canonical order) of the hip roll and yaw joints (hip-position reward).
 pub const HIP_ROLL_YAW: [usize; 4] = [1, 2, 7, 8];
+/// Offsets of hip pitch, knee and ankle pitch within a leg's six joints (the
+/// left leg is joints 0-5, the right 6-11).
+pub const LEG_HIP_PITCH: usize = 0;
+pub const LEG_KNEE: usize = 3;
+pub const LEG_ANKLE_PITCH: usize = 4;
 /// Waist and arm joints (canonical indices).
 pub const UPPER_BODY: std::ops::Range<usize> = 12..NUM_JOINTS;
 /// Bodies whose positions the world-model tracking reward compares.

@@ -273,6 +273,23 @@ fn foot_lifting_terms_by_hand() {
     s.feet_pos[0][2] = a + h;
     close(term("feet_swing_clock", &s), 0.0);
 
+    // reference joint trajectory: 1 at the reference, the default pose in the clock's stance
+    use dreampolicy::env::rewards::reference_leg_pose;
+    s.gait_phase = 0.1; // left leg in stance (phase 0.1), right in swing (0.6)
+    let q_ref = reference_leg_pose(&s, &p);
+    assert_eq!(&q_ref[..6], &s.default_q[..6]);
+    assert!(q_ref[9] > s.default_q[9] && q_ref[6] < s.default_q[6] && q_ref[10] < s.default_q[10]);
+    close(
+        q_ref[6] + q_ref[9] + q_ref[10],
+        s.default_q[6] + s.default_q[9] + s.default_q[10],
+    );
+    s.q[..12].copy_from_slice(&q_ref);
+    close(term("ref_joint_pos", &s), 1.0);
+    s.q[3] += 0.3;
+    close(term("ref_joint_pos", &s), (-0.6f64).exp() - 0.06);
+    s.q[3] += 1.0;
+    close(term("ref_joint_pos", &s), (-2.6f64).exp() - 0.1);
+
     // standing still while commanded to move
     s.command = [0.8, 0.0, 0.0];
     s.base_lin_vel = [0.1, 0.0, 0.0];

@@ -430,6 +430,9 @@ pub struct RewardParams {
     pub ankle_stance_height: f64,
     /// Sole clearance at mid-swing that `feet_swing_clock` asks for (m).
     pub swing_clock_height: f64,
+    /// Hip-pitch flexion at mid-swing of `ref_joint_pos`'s reference (rad; the
+    /// knee flexes twice this, the ankle pitch as much as the hip).
+    pub ref_swing_amplitude: f64,
 }
 
 impl Default for RewardParams {
@@ -449,6 +452,7 @@ impl Default for RewardParams {
             clearance_sigma: 0.05,
             ankle_stance_height: 0.036,
             swing_clock_height: 0.10,
+            ref_swing_amplitude: 0.3,
         }
     }
 }

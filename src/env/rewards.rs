@@ -8,7 +8,7 @@
 //! ambiguous, the doc line says how it is read.
 use super::state::{wrap_angle, EnvState};
 use crate::config::RewardParams;
-use crate::robot::{HIP_ROLL_YAW, UPPER_BODY};
+use crate::robot::{HIP_ROLL_YAW, LEG_ANKLE_PITCH, LEG_HIP_PITCH, LEG_KNEE, UPPER_BODY};
 
 /// One reward term.
 pub struct Term {
@@ -64,6 +64,7 @@ terms! {
     upright: "exp(-(g_x^2 + g_y^2) / upright_sigma): a bounded, positive orientation term (mjlab's upright)";
     feet_air_time_biped: "while exactly one foot is in contact and |v_cmd| > 0.1: min(time both feet have spent in their current mode, feet_air_time_threshold) (Isaac Lab's G1 feet_air_time_positive_biped)";
     foot_clearance: "exp(-sum_feet tanh(2 |v_xy(foot)|) (z_foot - ground - foot_clearance_target)^2 / clearance_sigma): only a foot that moves is asked to be high (Isaac Lab's velocity-weighted clearance)";
+    ref_joint_pos: "exp(-2 d) - 0.2 min(d, 0.5), d = ||q_legs - q_ref|| over the 12 leg joints; q_ref is the default pose plus, in each leg's clock swing, hip pitch -A sin(pi s), knee +2A sin(pi s), ankle pitch -A sin(pi s) (A = ref_swing_amplitude: the foot lifts and stays level; humanoid-gym's reference trajectory)";
     stand_still: "1 while a planar command of |v_cmd| > 0.2 m/s is given and the base moves along it at less than a quarter of it: standing in front of an obstacle must not pay";
     feet_swing_clock: "sum over legs in the gait clock's swing phase of (z_foot - ground - ankle_stance_height - swing_clock_height sin(pi s))^2, s in [0, 1] the swing's progress (walk-these-ways' clock target: a foot kept down in swing pays)";
 }
@@ -358,6 +359,32 @@ fn feet_swing_clock(s: &EnvState, p: &RewardParams) -> f64 {
                 .map(|z| sq(s.feet_pos[k][2] - s.feet_ground[k] - z))
         })
         .sum()
+}
+
+/// The reference pose of the 12 leg joints at gait clock `phase`: the default
+/// pose, with each leg in its clock swing flexing hip pitch, knee and ankle pitch
+/// along a half sine (`ref_joint_pos`).
+pub fn reference_leg_pose(s: &EnvState, p: &RewardParams) -> [f64; 12] {
+    let mut q = [0.0; 12];
+    q.copy_from_slice(&s.default_q[..12]);
+    for k in 0..2 {
+        let leg = (s.gait_phase + 0.5 * k as f64).fract();
+        if leg >= p.gait_stance_ratio {
+            let progress = (leg - p.gait_stance_ratio) / (1.0 - p.gait_stance_ratio);
+            let a = p.ref_swing_amplitude * (std::f64::consts::PI * progress).sin();
+            let base = 6 * k;
+            q[base + LEG_HIP_PITCH] -= a;
+            q[base + LEG_KNEE] += 2.0 * a;
+            q[base + LEG_ANKLE_PITCH] -= a;
+        }
+    }
+    q
+}
+
+fn ref_joint_pos(s: &EnvState, p: &RewardParams) -> f64 {
+    let q_ref = reference_leg_pose(s, p);
+    let d = norm(q_ref.iter().zip(&s.q[..12]).map(|(r, q)| q - r));
+    (-2.0 * d).exp() - 0.2 * d.min(0.5)
 }
 
 fn stand_still(s: &EnvState, _: &RewardParams) -> f64 {
