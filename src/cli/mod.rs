@@ -1,0 +1,88 @@
+//! The `dreampolicy` command line: the top-level parser, one variant per
+//! command, and the dispatch. Each command's arguments and body live in its own
+//! module below.
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+
+mod bench;
+mod collect;
+mod data;
+mod eval;
+mod eval_wm;
+mod export;
+mod info;
+mod play;
+mod plot;
+mod rollout;
+mod terrain;
+mod train;
+
+#[derive(Parser)]
+#[command(
+    name = "dreampolicy",
+    version,
+    about = "DreamPolicy for the Unitree G1 on MuJoCo"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// MuJoCo and libtorch versions, device, threads, and the G1 model's sizes.
+    Info(info::InfoArgs),
+    /// Speed measurements, as ratios against a baseline measured in the same run.
+    #[command(subcommand)]
+    Bench(bench::BenchCommand),
+    /// Drive the env with a fixed policy (zero or random actions) and report
+    /// per-term episode rewards, falls, time-outs, blow-ups and terrain levels.
+    Rollout(rollout::RolloutArgs),
+    /// Train a policy.
+    #[command(subcommand)]
+    Train(train::TrainCommand),
+    /// Roll out every terrain specialist on its terrain and write the expert
+    /// dataset (MCAP shards, one per specialist and round; existing shards are
+    /// kept and skipped, so the same command resumes a crashed collection).
+    Collect(collect::CollectArgs),
+    /// Evaluate checkpoints on 10 m lanes: success and completion rates,
+    /// velocity-tracking error, falls. Several checkpoints and terrains give the
+    /// cross-terrain matrix (a table, JSON and a heatmap PNG). `eval world-model`
+    /// evaluates a world-model checkpoint on its validation split instead.
+    #[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
+    Eval(eval::EvalArgs),
+    /// Roll a checkpoint's policy out on one lane and write the rollout as an
+    /// MCAP file for Foxglove (transforms, robot, terrain, command, state, reward).
+    Play(play::PlayArgs),
+    /// Draw a run directory's training curves (plots/training.png) from its metrics.csv.
+    Plot(plot::PlotArgs),
+    /// Export a checkpoint's actor (normalization included) as TorchScript.
+    Export(export::ExportArgs),
+    /// Procedural terrains.
+    #[command(subcommand)]
+    Terrain(terrain::TerrainCommand),
+    /// The expert dataset (MCAP shards): inspect, verify.
+    #[command(subcommand)]
+    Data(data::DataCommand),
+}
+
+/// Runs the parsed command.
+pub fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Info(a) => info::run(a),
+        Command::Bench(which) => bench::run(which),
+        Command::Rollout(a) => rollout::run(a),
+        Command::Train(which) => train::run(which),
+        Command::Collect(a) => collect::run(a),
+        Command::Eval(eval::EvalArgs {
+            which: Some(eval::EvalCommand::WorldModel(a)),
+            ..
+        }) => eval_wm::run(a),
+        Command::Eval(a) => eval::run(a),
+        Command::Play(a) => play::run(a),
+        Command::Plot(a) => plot::run(a),
+        Command::Export(a) => export::run(a),
+        Command::Terrain(which) => terrain::run(which),
+        Command::Data(which) => data::run(which),
+    }
+}

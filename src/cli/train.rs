@@ -1,0 +1,119 @@
+//! `dreampolicy train ...`: the PPO specialist and the diffusion world model,
+//! fresh or resumed.
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use clap::Subcommand;
+
+use dreampolicy::config;
+
+#[derive(Subcommand)]
+pub enum TrainCommand {
+    /// PPO specialist (the flat walker, a terrain specialist) on the G1 env.
+    Specialist(TrainArgs),
+    /// The diffusion world model on an expert dataset (configs/world_model/*.yaml).
+    WorldModel(TrainArgs),
+}
+
+/// What every trainer takes.
+#[derive(clap::Args)]
+pub struct TrainArgs {
+    /// Experiment config (YAML).
+    #[arg(long, required_unless_present = "resume")]
+    config: Option<PathBuf>,
+    /// Override a config value, e.g. --set ppo.learning_rate=1e-4 (repeatable).
+    #[arg(long = "set")]
+    sets: Vec<String>,
+    /// Run directory (default runs/<config name>).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Continue the run in this directory from its latest checkpoint (its
+    /// config.yaml, plus any --set, e.g. a larger train.iterations).
+    #[arg(long)]
+    resume: Option<PathBuf>,
+    /// Overrides train.seed.
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Overrides env.threads and train.torch_threads.
+    #[arg(long)]
+    threads: Option<i64>,
+    /// Plain log lines instead of a progress bar.
+    #[arg(long)]
+    quiet: bool,
+}
+
+pub fn run(which: TrainCommand) -> Result<()> {
+    match which {
+        TrainCommand::Specialist(args) => train_specialist(args),
+        TrainCommand::WorldModel(args) => train_world_model(args),
+    }
+}
+
+fn train_specialist(args: TrainArgs) -> Result<()> {
+    let (cfg, run_path) =
+        train_setup(&args, &["env.threads", "train.torch_threads"], config::load)?;
+    let s = dreampolicy::rl::runner::train(&cfg, &run_path, args.resume.is_some(), args.quiet)
+        .with_context(|| format!("training in {}", run_path.display()))?;
+    println!("{}", serde_json::to_string(&s)?);
+    Ok(())
+}
+
+fn train_world_model(args: TrainArgs) -> Result<()> {
+    let (cfg, run_path) = train_setup(&args, &["train.torch_threads"], config::load_world_model)?;
+    let s = dreampolicy::world_model::train(&cfg, &run_path, args.resume.is_some(), args.quiet)
+        .with_context(|| format!("training the world model in {}", run_path.display()))?;
+    println!("{}", serde_json::to_string(&s)?);
+    Ok(())
+}
+
+/// The config and run directory of a `train` subcommand: `--resume DIR`
+/// reloads `DIR/config.yaml`, else `--config` goes into a fresh run directory;
+/// `--seed` sets `train.seed` and `--threads` every key of `thread_keys`
+/// (appended after the `--set` overrides, as before).
+fn train_setup<C, E>(
+    args: &TrainArgs,
+    thread_keys: &[&str],
+    load: impl Fn(&Path, &[String]) -> std::result::Result<C, E>,
+) -> Result<(C, PathBuf)>
+where
+    E: std::error::Error + Send + Sync + 'static,
+{
+    let mut sets = args.sets.clone();
+    if let Some(seed) = args.seed {
+        sets.push(format!("train.seed={seed}"));
+    }
+    if let Some(t) = args.threads {
+        sets.extend(thread_keys.iter().map(|k| format!("{k}={t}")));
+    }
+    match &args.resume {
+        Some(dir) => {
+            let cfg = load(&dir.join("config.yaml"), &sets)
+                .with_context(|| format!("resuming {}", dir.display()))?;
+            Ok((cfg, dir.clone()))
+        }
+        None => {
+            let path = args.config.as_ref().context("--config is required")?;
+            let cfg = load(path, &sets)?;
+            Ok((cfg, fresh_run_dir(path, args.out.as_ref())?))
+        }
+    }
+}
+
+/// The run directory of a fresh run: `--out`, or `runs/<config name>`; refused
+/// when it already holds a run.
+fn fresh_run_dir(config: &Path, out: Option<&PathBuf>) -> Result<PathBuf> {
+    let stem = config
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "run".into());
+    let out = out
+        .cloned()
+        .unwrap_or_else(|| PathBuf::from("runs").join(stem));
+    if dreampolicy::run::latest_checkpoint(&out).exists() {
+        anyhow::bail!(
+            "{} already holds a run: continue it with --resume {0}, or choose another --out",
+            out.display()
+        );
+    }
+    Ok(out)
+}
