@@ -283,9 +283,25 @@ fn action_rate_l2(s: &EnvState, _: &RewardParams) -> f64 {
         .sum()
 }
 
+/// Leg `k`'s own phase at gait clock `phase` (the right leg half a period later).
+fn leg_phase(phase: f64, k: usize) -> f64 {
+    (phase + 0.5 * k as f64).fract()
+}
+
 /// Whether leg `k` (0 left, 1 right) should be in stance at gait clock `phase`.
 pub fn leg_in_stance(phase: f64, k: usize, stance_ratio: f64) -> bool {
-    (phase + 0.5 * k as f64).fract() < stance_ratio
+    leg_phase(phase, k) < stance_ratio
+}
+
+/// `sin(pi s)` of leg `k`'s swing progress `s` in [0, 1] at gait clock `phase`
+/// (0 at lift-off and touchdown, 1 at mid-swing), or None in the clock's stance:
+/// the shape of the clock's swing targets.
+fn swing_lift(phase: f64, k: usize, stance_ratio: f64) -> Option<f64> {
+    let leg = leg_phase(phase, k);
+    (leg >= stance_ratio).then(|| {
+        let progress = (leg - stance_ratio) / (1.0 - stance_ratio);
+        (std::f64::consts::PI * progress).sin()
+    })
 }
 
 fn gait_contact(s: &EnvState, p: &RewardParams) -> f64 {
@@ -345,11 +361,8 @@ fn foot_clearance(s: &EnvState, p: &RewardParams) -> f64 {
 /// The clock's swing-height target of leg `k` at gait clock `phase` (ankle
 /// height above the ground), or None while the clock has the leg in stance.
 pub fn swing_clock_target(phase: f64, k: usize, p: &RewardParams) -> Option<f64> {
-    let leg = (phase + 0.5 * k as f64).fract();
-    (leg >= p.gait_stance_ratio).then(|| {
-        let progress = (leg - p.gait_stance_ratio) / (1.0 - p.gait_stance_ratio);
-        p.ankle_stance_height + p.swing_clock_height * (std::f64::consts::PI * progress).sin()
-    })
+    swing_lift(phase, k, p.gait_stance_ratio)
+        .map(|lift| p.ankle_stance_height + p.swing_clock_height * lift)
 }
 
 fn feet_swing_clock(s: &EnvState, p: &RewardParams) -> f64 {
@@ -368,10 +381,8 @@ pub fn reference_leg_pose(s: &EnvState, p: &RewardParams) -> [f64; 12] {
     let mut q = [0.0; 12];
     q.copy_from_slice(&s.default_q[..12]);
     for k in 0..2 {
-        let leg = (s.gait_phase + 0.5 * k as f64).fract();
-        if leg >= p.gait_stance_ratio {
-            let progress = (leg - p.gait_stance_ratio) / (1.0 - p.gait_stance_ratio);
-            let a = p.ref_swing_amplitude * (std::f64::consts::PI * progress).sin();
+        if let Some(lift) = swing_lift(s.gait_phase, k, p.gait_stance_ratio) {
+            let a = p.ref_swing_amplitude * lift;
             let base = 6 * k;
             q[base + LEG_HIP_PITCH] -= a;
             q[base + LEG_KNEE] += 2.0 * a;
