@@ -22,10 +22,11 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
-use crate::config::{ConfigError, TerrainMode};
+use crate::config::ConfigError;
 use crate::data::{
     shard_file_name, DataError, DatasetInfo, DatasetStats, Dims, Frame, ShardWriter, WriterOptions,
 };
+use crate::env::config::TerrainMode;
 use crate::env::VecEnv;
 use crate::rl::checkpoint::Checkpoint;
 use crate::rl::{Agent, RlError, VecTask};

@@ -92,7 +92,7 @@ fn rollout_writes_a_run_directory_whose_config_loads_back() {
     );
     assert_eq!(lines.len(), 1 + 2, "rows at steps 50 and 60");
     // the resolved config is complete and loads back as it was run
-    let back = dreampolicy::config::load(&dir.join("config.yaml"), &[]).unwrap();
+    let back = dreampolicy::rl::config::load(&dir.join("config.yaml"), &[]).unwrap();
     assert_eq!(back.env.n_envs, 4);
     assert_eq!(back.env.episode_length_s, 0.5);
     assert!(std::fs::read_to_string(dir.join("log.txt"))

@@ -23,7 +23,7 @@ fn every_shipped_config_loads() {
     for f in &files {
         // configs/world_model/ holds the other file kind
         if f.parent().is_some_and(|d| d.ends_with("world_model")) {
-            dreampolicy::config::load_world_model(f, &[])
+            dreampolicy::world_model::config::load_world_model(f, &[])
                 .unwrap_or_else(|e| panic!("{}: {e}", f.display()));
             continue;
         }
@@ -40,11 +40,11 @@ fn every_shipped_config_loads() {
             );
             continue;
         }
-        dreampolicy::config::load(f, &[]).unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+        dreampolicy::rl::config::load(f, &[]).unwrap_or_else(|e| panic!("{}: {e}", f.display()));
     }
     // and a typo in a training section is refused with the key named
     let flat = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/specialist/flat.yaml");
-    let e = dreampolicy::config::load(&flat, &["ppo.learning_rat=1e-3".into()])
+    let e = dreampolicy::rl::config::load(&flat, &["ppo.learning_rat=1e-3".into()])
         .err()
         .unwrap()
         .to_string();

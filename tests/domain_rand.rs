@@ -1,7 +1,7 @@
 //! Domain randomization and commands do what the config says.
-use dreampolicy::config::ExperimentConfig;
 use dreampolicy::env::obs::OBS_DIM;
 use dreampolicy::env::{Scene, VecEnv};
+use dreampolicy::rl::config::ExperimentConfig;
 use dreampolicy::robot::NUM_JOINTS;
 
 mod common;

@@ -1,8 +1,8 @@
 //! The locomotion env and VecEnv on a plane: layout, standing, determinism,
 //! blow-up recovery, config errors.
-use dreampolicy::config::{self, ExperimentConfig};
 use dreampolicy::env::obs::{self, CRITIC_DIM, OBS_DIM, SCAN_DIM};
 use dreampolicy::env::VecEnv;
+use dreampolicy::rl::config::ExperimentConfig;
 use dreampolicy::robot::NUM_JOINTS;
 
 mod common;
@@ -186,7 +186,7 @@ fn bad_configs_give_one_clear_message() {
     .unwrap();
     let err = |sets: &[&str]| {
         let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
-        config::from_str(&base, "flat_small.yaml", &sets)
+        dreampolicy::rl::config::from_str(&base, "flat_small.yaml", &sets)
             .unwrap_err()
             .to_string()
     };
@@ -209,7 +209,8 @@ fn bad_configs_give_one_clear_message() {
         let m = err(&["env.sim.integrator=implicitfast"]);
         assert!(m.contains("implicitfast needs MuJoCo 3.x"), "{m}");
     } else {
-        config::from_str(&base, "x", &["env.sim.integrator=implicitfast".into()]).unwrap();
+        dreampolicy::rl::config::from_str(&base, "x", &["env.sim.integrator=implicitfast".into()])
+            .unwrap();
     }
     let m = err(&["novalue"]);
     assert!(m.contains("expected key.path=value"), "{m}");

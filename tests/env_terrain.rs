@@ -1,8 +1,8 @@
 //! The env on the procedural terrain map: scandots against mj_ray, the curriculum,
 //! falls and map edges, terrain config errors.
-use dreampolicy::config::{self, ExperimentConfig};
 use dreampolicy::env::obs::{self, SCAN_DIM};
 use dreampolicy::env::VecEnv;
+use dreampolicy::rl::config::ExperimentConfig;
 use dreampolicy::robot::NUM_JOINTS;
 
 mod common;
@@ -124,18 +124,18 @@ fn leaving_the_map_truncates_without_terminating() {
 #[test]
 fn terrain_config_errors_are_clear() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/terrain_small.yaml");
-    let e = config::load(&path, &["env.terrain.map.kinds={lava: 1.0}".into()])
+    let e = dreampolicy::rl::config::load(&path, &["env.terrain.map.kinds={lava: 1.0}".into()])
         .unwrap_err()
         .to_string();
     assert!(
         e.contains("unknown terrain kind 'lava'") && e.contains("balancing_beam"),
         "{e}"
     );
-    let e = config::load(&path, &["env.terrain.map.num_levels=0".into()])
+    let e = dreampolicy::rl::config::load(&path, &["env.terrain.map.num_levels=0".into()])
         .unwrap_err()
         .to_string();
     assert!(e.contains("num_levels"), "{e}");
-    let e = config::load(&path, &["env.terrain.map.tile_length=-2".into()])
+    let e = dreampolicy::rl::config::load(&path, &["env.terrain.map.tile_length=-2".into()])
         .unwrap_err()
         .to_string();
     assert!(e.contains("tile_length"), "{e}");

@@ -355,7 +355,7 @@ fn terrain_lanes_are_walked_and_episodes_spread_over_lanes() {
 
     // a level the lanes' terrain table does not have is a clear config error
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/test/g1_tiny.yaml");
-    let e = dreampolicy::config::load(&path, &["eval.level=12".to_string()])
+    let e = dreampolicy::rl::config::load(&path, &["eval.level=12".to_string()])
         .err()
         .unwrap()
         .to_string();

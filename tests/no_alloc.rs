@@ -3,7 +3,6 @@
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
-use dreampolicy::config;
 use dreampolicy::env::VecEnv;
 use dreampolicy::robot::NUM_JOINTS;
 
@@ -41,7 +40,7 @@ fn vec_env_step_does_not_allocate() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/terrain_small.yaml");
     // short episodes so that resets happen inside the window
     let sets = ["env.n_envs=8", "env.threads=2", "env.episode_length_s=0.2"].map(String::from);
-    let cfg = config::load(&path, &sets).unwrap();
+    let cfg = dreampolicy::rl::config::load(&path, &sets).unwrap();
     let mut v = VecEnv::new(&cfg.env).unwrap();
     let actions = vec![0.1f32; 8 * NUM_JOINTS];
     for _ in 0..5 {

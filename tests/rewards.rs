@@ -1,9 +1,9 @@
 //! Reward terms by hand on known states, the weighted sum, and the curriculum rule.
 use std::collections::BTreeMap;
 
-use dreampolicy::config::{RewardConfig, RewardParams};
 use dreampolicy::env::locomotion::next_level;
 use dreampolicy::env::rewards::{lookup, names, RewardSet};
+use dreampolicy::env::rewards::{RewardConfig, RewardParams};
 use dreampolicy::env::EnvState;
 use dreampolicy::robot::NUM_JOINTS;
 use rand::SeedableRng;

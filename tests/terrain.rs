@@ -917,6 +917,12 @@ fn bad_configs_are_clear_errors() {
     assert!(msg.contains("horizontal_scale"), "{msg}");
     let msg = yaml_err("stair: {tread: [0.4, 0.0]}");
     assert!(msg.contains("stair.tread[1]"), "{msg}");
+    // a bound that must be positive says so, not f64::MIN_POSITIVE's 300 digits
+    let msg = yaml_err("gap: {gap: [0.0, 0.3]}");
+    assert!(
+        msg.contains("gap.gap[0]") && msg.contains("> 0") && msg.len() < 200,
+        "{msg}"
+    );
     // the resolved config round-trips through YAML
     let cfg = all_kinds_config();
     let text = serde_yaml::to_string(&cfg).unwrap();

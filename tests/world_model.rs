@@ -12,13 +12,14 @@ mod common;
 use std::path::Path;
 
 use common::Scratch;
-use dreampolicy::config::{
-    world_model_from_str, ObservationConfig, SamplerKind, SamplingConfig, WorldModelConfig,
-};
 use dreampolicy::data::{Dataset, ReadOptions};
+use dreampolicy::env::config::ObservationConfig;
 use dreampolicy::env::obs::{scan_point, ANG_VEL, COMMAND, SCAN_DIM};
 use dreampolicy::run::latest_checkpoint;
 use dreampolicy::terrain::TerrainKind;
+use dreampolicy::world_model::config::{
+    world_model_from_str, SamplerKind, SamplingConfig, WorldModelConfig,
+};
 use dreampolicy::world_model::sampler::{guided_x0, sample};
 use dreampolicy::world_model::sequences::{validation_windows, Sequences};
 use dreampolicy::world_model::{
@@ -390,7 +391,7 @@ fn a_resumed_run_is_bit_identical() {
         1
     );
     // the config written into the run loads back as a world-model config
-    dreampolicy::config::load_world_model(&half.join("config.yaml"), &[]).unwrap();
+    dreampolicy::world_model::config::load_world_model(&half.join("config.yaml"), &[]).unwrap();
 }
 
 #[test]

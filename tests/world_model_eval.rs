@@ -10,9 +10,9 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use common::Scratch;
-use dreampolicy::config::world_model_from_str;
 use dreampolicy::run::latest_checkpoint;
 use dreampolicy::terrain::TerrainKind;
+use dreampolicy::world_model::config::world_model_from_str;
 use dreampolicy::world_model::{evaluate, train, WmEvalOptions};
 
 /// `n_envs` envs for `steps` steps; env `e`'s episodes last `40 + 10 e` steps.

@@ -60,7 +60,7 @@ pub struct DataBench {
 /// `(reader sequences/s, trainer sequences/s)`.
 pub fn headroom(
     path: &Path,
-    cfg: &crate::config::WorldModelConfig,
+    cfg: &crate::world_model::config::WorldModelConfig,
     shuffle_capacity: usize,
     batches: usize,
 ) -> Result<(f64, f64), crate::world_model::WmError> {
@@ -191,7 +191,7 @@ pub fn data(
     spec: WindowSpec,
     shuffle_capacity: usize,
     rounds: usize,
-    trainer: Option<&crate::config::WorldModelConfig>,
+    trainer: Option<&crate::world_model::config::WorldModelConfig>,
 ) -> Result<DataBench, DataError> {
     let tmp = std::env::temp_dir().join(format!("dreampolicy-bench-data-{}", std::process::id()));
     let (path, synthetic) = match (dir, out) {

@@ -91,7 +91,7 @@ pub struct EnvBench {
 /// config's batch (threads forced to 1, then 2), zero actions (the robots stand
 /// at their spawn points, as in the baseline), alternating rounds, best of each.
 pub fn env(
-    cfg: &crate::config::EnvConfig,
+    cfg: &crate::env::config::EnvConfig,
     label: &str,
     control_steps: usize,
     rounds: usize,

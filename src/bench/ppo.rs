@@ -12,8 +12,8 @@ use std::time::Instant;
 use serde::Serialize;
 use tch::{Kind, Tensor};
 
-use crate::config::{ExperimentConfig, HistoryKind};
 use crate::env::VecEnv;
+use crate::rl::config::{ExperimentConfig, HistoryKind};
 use crate::rl::runner::Trainer;
 use crate::rl::RlError;
 

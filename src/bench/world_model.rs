@@ -12,7 +12,7 @@ use std::time::Instant;
 use serde::Serialize;
 use tch::{Device, Kind, Tensor};
 
-use crate::config::{SamplerKind, SamplingConfig, WorldModelConfig};
+use crate::world_model::config::{SamplerKind, SamplingConfig, WorldModelConfig};
 use crate::world_model::sampler::{sample, Noise};
 use crate::world_model::trainer::WmTrainer;
 use crate::world_model::{Denoiser, NoiseSchedule, WmError};

@@ -5,8 +5,10 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::Subcommand;
 
+use dreampolicy::bench;
 use dreampolicy::data::WindowSpec;
-use dreampolicy::{bench, config};
+use dreampolicy::rl::config;
+use dreampolicy::world_model::config::load_world_model;
 
 #[derive(Subcommand)]
 pub enum BenchCommand {
@@ -165,11 +167,11 @@ fn ppo(a: PpoArgs) -> Result<()> {
 }
 
 fn world_model(a: WorldModelArgs) -> Result<()> {
-    let cfg = config::load_world_model(&a.config, &a.sets)?;
+    let cfg = load_world_model(&a.config, &a.sets)?;
     let paper = if a.config_only {
         None
     } else {
-        Some(config::load_world_model(&a.paper_config, &[])?)
+        Some(load_world_model(&a.paper_config, &[])?)
     };
     tch::set_num_threads(cfg.train.torch_threads as i32);
     let r = bench::world_model::world_model(
@@ -236,7 +238,7 @@ fn data(a: BenchDataArgs) -> Result<()> {
     let wm = if a.no_headroom {
         None
     } else {
-        let cfg = config::load_world_model(&a.wm_config, &[])
+        let cfg = load_world_model(&a.wm_config, &[])
             .with_context(|| "the headroom needs a world-model config (--no-headroom skips it)")?;
         tch::set_num_threads(cfg.train.torch_threads as i32);
         Some(cfg)

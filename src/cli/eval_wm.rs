@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 
-use dreampolicy::config::SamplerKind;
+use dreampolicy::world_model::config::SamplerKind;
 use dreampolicy::world_model::{evaluate, WmEvalOptions};
 
 /// Arguments of `eval world-model`.

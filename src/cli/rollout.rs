@@ -4,7 +4,6 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 
-use dreampolicy::config;
 use dreampolicy::env::rollout::{self, FixedPolicy};
 
 /// Arguments of `rollout`.
@@ -54,12 +53,12 @@ pub fn run(a: RolloutArgs) -> Result<()> {
     if let Some(t) = threads {
         sets.push(format!("env.threads={t}"));
     }
-    let cfg = config::load(&config, &sets)?;
+    let cfg = dreampolicy::rl::config::load(&config, &sets)?;
     let mut run_dir = out
         .as_deref()
         .map(|p| dreampolicy::run::RunDir::create(p, &cfg, &rollout::METRICS))
         .transpose()?;
-    let s = rollout::rollout(&cfg, steps, policy, run_dir.as_mut(), 50, quiet)?;
+    let s = rollout::rollout(&cfg.env, steps, policy, run_dir.as_mut(), 50, quiet)?;
     let text = serde_json::to_string(&s)?;
     if let Some(run) = run_dir.as_mut() {
         run.log(&format!("rollout {policy:?} {} steps: {text}", s.steps))?;

@@ -5,7 +5,6 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::Subcommand;
 
-use dreampolicy::config;
 use dreampolicy::terrain::{render, TerrainConfig, TerrainKind, TerrainMap};
 
 #[derive(Subcommand)]
@@ -59,7 +58,7 @@ fn render_cmd(a: RenderArgs) -> Result<()> {
         out,
     } = a;
     let cfg = match config {
-        Some(path) => config::load(&path, &sets)?.env.terrain.map,
+        Some(path) => dreampolicy::rl::config::load(&path, &sets)?.env.terrain.map,
         None => TerrainConfig::default(),
     };
     cfg.validate()?;

@@ -5,8 +5,6 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use clap::Subcommand;
 
-use dreampolicy::config;
-
 #[derive(Subcommand)]
 pub enum TrainCommand {
     /// PPO specialist (the flat walker, a terrain specialist) on the G1 env.
@@ -50,8 +48,11 @@ pub fn run(which: TrainCommand) -> Result<()> {
 }
 
 fn train_specialist(args: TrainArgs) -> Result<()> {
-    let (cfg, run_path) =
-        train_setup(&args, &["env.threads", "train.torch_threads"], config::load)?;
+    let (cfg, run_path) = train_setup(
+        &args,
+        &["env.threads", "train.torch_threads"],
+        dreampolicy::rl::config::load,
+    )?;
     let s = dreampolicy::rl::runner::train(&cfg, &run_path, args.resume.is_some(), args.quiet)
         .with_context(|| format!("training in {}", run_path.display()))?;
     println!("{}", serde_json::to_string(&s)?);
@@ -59,7 +60,11 @@ fn train_specialist(args: TrainArgs) -> Result<()> {
 }
 
 fn train_world_model(args: TrainArgs) -> Result<()> {
-    let (cfg, run_path) = train_setup(&args, &["train.torch_threads"], config::load_world_model)?;
+    let (cfg, run_path) = train_setup(
+        &args,
+        &["train.torch_threads"],
+        dreampolicy::world_model::config::load_world_model,
+    )?;
     let s = dreampolicy::world_model::train(&cfg, &run_path, args.resume.is_some(), args.quiet)
         .with_context(|| format!("training the world model in {}", run_path.display()))?;
     println!("{}", serde_json::to_string(&s)?);

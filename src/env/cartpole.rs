@@ -8,8 +8,8 @@ use std::sync::Arc;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+use super::task::{EnvSnapshot, TaskDims, VecTask};
 use super::{EnvError, Outcome, StepInfo};
-use crate::rl::task::{EnvSnapshot, TaskDims, VecTask};
 use crate::sim::{Data, Model};
 
 pub const OBS_DIM: usize = 5;

@@ -22,7 +22,7 @@ use super::obs;
 use super::scene::BodyClass;
 use super::state::{rotate_inv, rpy, wrap_angle, EnvState};
 use super::{EnvShared, Outcome};
-use crate::config::TerrainMode;
+use crate::env::config::TerrainMode;
 use crate::robot::NUM_JOINTS;
 use crate::sim::{contact_geoms, Data, SimError};
 
@@ -160,17 +160,13 @@ impl LocoEnv {
         &self.last_sums
     }
 
-    /// RNG state and level (see `rl::task::EnvSnapshot`).
-    pub fn snapshot(&self) -> crate::rl::task::EnvSnapshot {
-        crate::rl::task::EnvSnapshot::new(&self.rng, self.level)
+    /// RNG state and level (see `env::task::EnvSnapshot`).
+    pub fn snapshot(&self) -> super::task::EnvSnapshot {
+        super::task::EnvSnapshot::new(&self.rng, self.level)
     }
 
     /// Restore a snapshot's RNG and level.
-    pub fn restore(
-        &mut self,
-        sh: &EnvShared,
-        s: &crate::rl::task::EnvSnapshot,
-    ) -> Result<(), String> {
+    pub fn restore(&mut self, sh: &EnvShared, s: &super::task::EnvSnapshot) -> Result<(), String> {
         let levels = sh.scene.terrain.as_ref().map_or(1, |m| m.num_levels());
         if s.level >= levels {
             return Err(format!("level {} of a map with {levels} levels", s.level));

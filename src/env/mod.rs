@@ -2,6 +2,7 @@
 //! [`VecEnv`]: observations ([`obs`] holds the layout), commands, named reward
 //! terms ([`rewards`]), terminations, terrain curriculum, domain randomization.
 pub mod cartpole;
+pub mod config;
 pub mod locomotion;
 pub mod mirror;
 pub mod obs;
@@ -9,6 +10,7 @@ pub mod rewards;
 pub mod rollout;
 pub mod scene;
 pub mod state;
+pub mod task;
 mod vec_env;
 
 pub use locomotion::{EpisodeEnd, LocoEnv};
@@ -16,7 +18,7 @@ pub use scene::Scene;
 pub use state::EnvState;
 pub use vec_env::{StepInfo, VecEnv};
 
-use crate::config::EnvConfig;
+use crate::env::config::EnvConfig;
 use crate::sim::SimError;
 
 /// Errors building an environment.

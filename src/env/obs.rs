@@ -25,7 +25,7 @@ use rand::Rng;
 
 use super::scene::BucketParams;
 use super::state::EnvState;
-use crate::config::ObservationConfig;
+use crate::env::config::ObservationConfig;
 use crate::robot::NUM_JOINTS;
 
 pub const ANG_VEL: std::ops::Range<usize> = 0..3;

@@ -7,7 +7,11 @@
 //! velocity-tracking terms for the flat walker. Where the paper's formula is
 //! ambiguous, the doc line says how it is read.
 use super::state::{wrap_angle, EnvState};
-use crate::config::RewardParams;
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use crate::config::ConfigError;
 use crate::robot::{HIP_ROLL_YAW, LEG_ANKLE_PITCH, LEG_HIP_PITCH, LEG_KNEE, UPPER_BODY};
 
 /// One reward term.
@@ -419,7 +423,7 @@ pub struct RewardSet {
 
 impl RewardSet {
     /// Resolve `name: weight` pairs; the config was validated, but this checks again.
-    pub fn new(cfg: &crate::config::RewardConfig) -> Result<RewardSet, String> {
+    pub fn new(cfg: &RewardConfig) -> Result<RewardSet, String> {
         let terms = cfg
             .terms
             .iter()
@@ -467,5 +471,122 @@ impl RewardSet {
         } else {
             total
         }
+    }
+}
+
+/// Reward terms by name with their weights, and the parameters they share.
+/// Every term's value is multiplied by `weight * dt` (legged_gym / mjlab).
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RewardConfig {
+    /// `name: weight`; an unknown name is a load error that lists the valid ones.
+    pub terms: BTreeMap<String, f64>,
+    #[serde(default)]
+    pub params: RewardParams,
+    /// Clip the per-step total at zero from below (legged_gym's only_positive_rewards).
+    #[serde(default)]
+    pub only_positive: bool,
+    /// Scale the penalties (negative weights) up as the policy learns to stay up.
+    #[serde(default)]
+    pub penalty_curriculum: Option<PenaltyCurriculum>,
+}
+
+/// Penalty curriculum: every negative-weight term is multiplied by a scale that
+/// starts at `initial` and rises by `step` (up to 1) after each PPO iteration
+/// whose mean episode length reaches `length_frac` of the time limit. Early on,
+/// a random policy's joint-velocity, acceleration and tumbling penalties outweigh
+/// every positive term, so ending the episode fast is what pays; a small scale
+/// makes staying up pay first.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PenaltyCurriculum {
+    pub initial: f64,
+    pub step: f64,
+    pub length_frac: f64,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RewardParams {
+    /// Width of the exp kernels of the tracking terms.
+    pub tracking_sigma: f64,
+    /// Pelvis height above the terrain that `base_height` aims for (m).
+    pub base_height_target: f64,
+    /// Air time (s) at touchdown that `feet_air_time` rewards above.
+    pub feet_air_time_target: f64,
+    /// Contact force (N) above which a body counts as colliding.
+    pub collision_force: f64,
+    /// Target lateral distance between the feet / knees (m).
+    pub feet_distance_target: f64,
+    /// Swing-foot clearance target (m) for `foot_height`.
+    pub foot_clearance_target: f64,
+    /// Terrain level from which `feet_edge` applies (the paper's "level > 3").
+    pub feet_edge_min_level: usize,
+    /// Fraction of the gait period a leg is in stance (`gait_contact`).
+    pub gait_stance_ratio: f64,
+    /// Swing-foot height above the ground that `feet_swing_height` aims for (m).
+    pub swing_height_target: f64,
+    /// Width of the `upright` kernel.
+    pub upright_sigma: f64,
+    /// Cap (s) of the single-support time that `feet_air_time_biped` pays.
+    pub feet_air_time_threshold: f64,
+    /// Width of the `foot_clearance` kernel (m^2 s^-0; Isaac Lab's Spot: 0.05).
+    pub clearance_sigma: f64,
+    /// Ankle height above the ground in stance (m): the base of `feet_swing_clock`'s
+    /// target (the G1's ankle sits 0.036 m above the sole, `eval`'s stance_foot_height).
+    pub ankle_stance_height: f64,
+    /// Sole clearance at mid-swing that `feet_swing_clock` asks for (m).
+    pub swing_clock_height: f64,
+    /// Hip-pitch flexion at mid-swing of `ref_joint_pos`'s reference (rad; the
+    /// knee flexes twice this, the ankle pitch as much as the hip).
+    pub ref_swing_amplitude: f64,
+}
+
+impl Default for RewardParams {
+    fn default() -> Self {
+        RewardParams {
+            tracking_sigma: 0.25,
+            base_height_target: 0.78,
+            feet_air_time_target: 0.5,
+            collision_force: 0.1,
+            feet_distance_target: 0.22,
+            foot_clearance_target: 0.08,
+            feet_edge_min_level: 3,
+            gait_stance_ratio: 0.55,
+            swing_height_target: 0.08,
+            upright_sigma: 0.2,
+            feet_air_time_threshold: 0.4,
+            clearance_sigma: 0.05,
+            ankle_stance_height: 0.036,
+            swing_clock_height: 0.10,
+            ref_swing_amplitude: 0.3,
+        }
+    }
+}
+
+impl RewardConfig {
+    /// Known term names and a sane penalty curriculum.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let bad = |m: String| Err(ConfigError::Invalid(m));
+        for name in self.terms.keys() {
+            if lookup(name).is_none() {
+                return bad(format!(
+                    "unknown reward term '{name}' in env.rewards.terms; valid terms: {}",
+                    names().join(", ")
+                ));
+            }
+        }
+        if let Some(pc) = &self.penalty_curriculum {
+            if !(0.0..=1.0).contains(&pc.initial)
+                || pc.step.is_nan()
+                || pc.step < 0.0
+                || !(0.0..=1.0).contains(&pc.length_frac)
+            {
+                return bad(format!(
+                    "env.rewards.penalty_curriculum needs initial and length_frac in [0, 1] and step >= 0, got {pc:?}"
+                ));
+            }
+        }
+        Ok(())
     }
 }

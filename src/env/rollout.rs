@@ -6,8 +6,8 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
+use super::config::EnvConfig;
 use super::{EnvError, VecEnv};
-use crate::config::ExperimentConfig;
 use crate::robot::NUM_JOINTS;
 use crate::run::{Progress, RunDir, RunError};
 
@@ -46,20 +46,20 @@ pub enum RolloutError {
     Run(#[from] RunError),
 }
 
-/// Run `steps` batch steps of `policy` on `cfg.env`, logging every `log_every`
+/// Run `steps` batch steps of `policy` on the env `cfg`, logging every `log_every`
 /// steps to `run` (if given) and to a progress bar.
 pub fn rollout(
-    cfg: &ExperimentConfig,
+    cfg: &EnvConfig,
     steps: usize,
     policy: FixedPolicy,
     mut run: Option<&mut RunDir>,
     log_every: usize,
     quiet: bool,
 ) -> Result<RolloutSummary, RolloutError> {
-    let mut env = VecEnv::new(&cfg.env)?;
+    let mut env = VecEnv::new(cfg)?;
     let n = env.n_envs();
     let names = env.shared().rewards.names();
-    let mut rng = ChaCha8Rng::seed_from_u64(cfg.env.seed ^ 0x5EED_F0A1);
+    let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x5EED_F0A1);
     let mut actions = vec![0.0f32; n * NUM_JOINTS];
     let mut s = RolloutSummary {
         steps,

@@ -15,7 +15,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::EnvError;
-use crate::config::{EnvConfig, HfieldContacts, TerrainMode};
+use crate::env::config::{EnvConfig, HfieldContacts, TerrainMode};
 use crate::robot::{self, G1};
 use crate::sim::hfield_contact::SURFACE_CONTACTS;
 use crate::sim::{HeightField, Model, ObjType};
@@ -257,7 +257,7 @@ fn bucket_models(
 /// so that robot geoms collide with the ground only. `feet_only` also clears the
 /// conaffinity of every non-foot robot geom: they touch nothing (Playground's
 /// G1 training scene).
-fn configure_collisions(model: &mut Model, g1: &G1, sim: &crate::config::SimConfig) {
+fn configure_collisions(model: &mut Model, g1: &G1, sim: &crate::env::config::SimConfig) {
     let self_collisions = sim.self_collisions;
     let bodies = model.geom_bodyid().to_vec();
     // world geoms and visual-only geoms (contype = conaffinity = 0) stay as they are
@@ -278,7 +278,7 @@ fn configure_collisions(model: &mut Model, g1: &G1, sim: &crate::config::SimConf
             }
         }
     }
-    if sim.collision == crate::config::CollisionMode::FeetOnly {
+    if sim.collision == crate::env::config::CollisionMode::FeetOnly {
         for (g, &b) in bodies.iter().enumerate() {
             if robot[g] && !g1.feet.contains(&(b as usize)) {
                 model.geom_contype_mut()[g] = 0;

@@ -10,7 +10,7 @@ use rayon::prelude::*;
 use super::locomotion::EnvOut;
 use super::obs::{CRITIC_DIM, OBS_DIM, SCAN_DIM};
 use super::{EnvError, EnvShared, LocoEnv, Outcome, Scene};
-use crate::config::EnvConfig;
+use crate::env::config::EnvConfig;
 use crate::robot::NUM_JOINTS;
 
 /// The batch.
@@ -107,13 +107,13 @@ impl VecEnv {
     }
 
     /// RNG state and curriculum level of every env (checkpoints).
-    pub fn snapshot(&self) -> Vec<crate::rl::task::EnvSnapshot> {
+    pub fn snapshot(&self) -> Vec<super::task::EnvSnapshot> {
         self.envs.iter().map(|e| e.snapshot()).collect()
     }
 
     /// Restore what [`VecEnv::snapshot`] took (then [`VecEnv::reset_all`]).
-    pub fn restore(&mut self, snaps: &[crate::rl::task::EnvSnapshot]) -> Result<(), String> {
-        crate::rl::task::EnvSnapshot::check_count(snaps, self.envs.len())?;
+    pub fn restore(&mut self, snaps: &[super::task::EnvSnapshot]) -> Result<(), String> {
+        super::task::EnvSnapshot::check_count(snaps, self.envs.len())?;
         for (e, s) in self.envs.iter_mut().zip(snaps) {
             e.restore(&self.shared, s)?;
         }

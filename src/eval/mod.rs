@@ -10,7 +10,8 @@
 //! from `eval.lin_vel_x`, no sideways speed, heading held along the lane.
 use serde::Serialize;
 
-use crate::config::{CollisionMode, EnvConfig, ExperimentConfig, Integrator, TerrainMode};
+use crate::env::config::{CollisionMode, EnvConfig, Integrator, TerrainMode};
+use crate::rl::config::ExperimentConfig;
 use std::sync::Arc;
 
 use crate::env::{Scene, VecEnv};
@@ -104,7 +105,7 @@ pub fn eval_env_config(cfg: &ExperimentConfig, o: &EvalOptions) -> EnvConfig {
     c.resample_time_s = e.time_limit_s * 2.0;
     c.min_norm = 0.0;
     if o.full_collision {
-        let d = crate::config::SimConfig::default();
+        let d = crate::env::config::SimConfig::default();
         env.sim.collision = CollisionMode::Full;
         env.sim.iterations = d.iterations;
         env.sim.ls_iterations = d.ls_iterations;

@@ -28,11 +28,10 @@ use std::sync::Arc;
 
 use serde::Serialize;
 
-use crate::config::{
-    CollisionMode, EnvConfig, ExperimentConfig, Integrator, SimConfig, TerrainMode,
-};
+use crate::env::config::{CollisionMode, EnvConfig, Integrator, SimConfig, TerrainMode};
 use crate::env::{EnvError, Scene, VecEnv};
 use crate::rl::checkpoint::Checkpoint;
+use crate::rl::config::ExperimentConfig;
 use crate::rl::{Agent, RlError, VecTask};
 use crate::terrain::{TerrainError, TerrainKind};
 use file::{PlayFile, Topic};

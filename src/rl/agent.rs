@@ -7,8 +7,8 @@ use tch::{Device, Kind, Tensor};
 
 use super::normalizer::RunningNorm;
 use super::policy::ActorCritic;
-use super::task::{TaskDims, VecTask};
-use crate::config::PolicyConfig;
+use crate::env::task::{TaskDims, VecTask};
+use crate::rl::config::PolicyConfig;
 
 /// Policy, normalizers and per-env history.
 pub struct Agent {

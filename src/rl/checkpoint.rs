@@ -11,9 +11,9 @@ use tch::{Kind, Tensor};
 use super::agent::Agent;
 use super::normalizer::RunningNorm;
 use super::optim::Adam;
-use super::task::{EnvSnapshot, TaskDims};
 use super::RlError;
 use crate::checkpoint::{save_named, NamedTensors};
+use crate::env::task::{EnvSnapshot, TaskDims};
 
 /// Bumped when the layout changes.
 pub const FORMAT: u32 = 1;
@@ -125,8 +125,8 @@ impl Checkpoint {
     }
 
     /// The resolved config stored in the checkpoint.
-    pub fn config(&self) -> Result<crate::config::ExperimentConfig, RlError> {
-        Ok(crate::config::from_str(
+    pub fn config(&self) -> Result<crate::rl::config::ExperimentConfig, RlError> {
+        Ok(crate::rl::config::from_str(
             &self.meta.config,
             &format!("{} (stored config)", self.path.display()),
             &[],

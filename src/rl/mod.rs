@@ -6,18 +6,19 @@
 //! cart-pole that tests PPO end to end.
 pub mod agent;
 pub mod checkpoint;
+pub mod config;
 pub mod export;
+pub mod metrics;
 pub mod normalizer;
 pub mod optim;
 pub mod policy;
 pub mod ppo;
 pub mod runner;
 pub mod storage;
-pub mod task;
 
+pub use crate::env::task::{TaskDims, VecTask};
 pub use agent::Agent;
 pub use policy::ActorCritic;
-pub use task::{TaskDims, VecTask};
 
 use std::path::PathBuf;
 

@@ -10,9 +10,9 @@
 use tch::nn::{self, Module, RNN};
 use tch::{Kind, Tensor};
 
-use crate::config::{Activation, HistoryKind, PolicyConfig};
+use crate::rl::config::{Activation, HistoryKind, PolicyConfig};
 
-use super::task::TaskDims;
+use crate::env::task::TaskDims;
 
 /// The networks and the variable store that owns them.
 pub struct ActorCritic {

@@ -10,7 +10,7 @@ use tch::{Kind, Tensor};
 use super::optim::Adam;
 use super::policy::ActorCritic;
 use super::storage::RolloutStorage;
-use crate::config::{LrSchedule, PpoConfig};
+use crate::rl::config::{LrSchedule, PpoConfig};
 
 /// Mean losses and diagnostics of one update.
 #[derive(Debug, Clone, Default, Serialize)]

@@ -18,40 +18,12 @@ use super::agent::Agent;
 use super::checkpoint::{self, Checkpoint, CheckpointMeta};
 use super::ppo::{Losses, Ppo};
 use super::storage::{RolloutStorage, Transition};
-use super::task::VecTask;
 use super::RlError;
-use crate::config::ExperimentConfig;
+use crate::env::task::VecTask;
+use crate::rl::config::ExperimentConfig;
 use crate::run::{Progress, RunDir};
 
-/// Columns of `metrics.csv` before the per-term rewards (`rew_<term>`).
-pub const COLUMNS: [&str; 26] = [
-    "iteration",
-    "env_steps",
-    "wall_time_s",
-    "mean_return",
-    "mean_episode_length",
-    "episodes",
-    "fall_fraction",
-    "vel_error_xy",
-    "vel_error_yaw",
-    "value_loss",
-    "surrogate_loss",
-    "entropy",
-    "kl",
-    "clip_fraction",
-    "explained_variance",
-    "learning_rate",
-    "mean_std",
-    "grad_norm",
-    "env_steps_per_s",
-    "time_physics_s",
-    "time_inference_s",
-    "time_update_s",
-    "terrain_level",
-    "blowups",
-    "mean_step_reward",
-    "penalty_scale",
-];
+pub use super::metrics::{columns, plot_run, COLUMNS};
 
 /// Where a run stands at its end.
 #[derive(Debug, Clone, Serialize)]
@@ -164,7 +136,7 @@ impl<'a, T: VecTask> Trainer<'a, T> {
             }
             ck.load_agent(&mut agent)?;
             ck.load_optimizer(&mut ppo.opt)?;
-            if cfg.ppo.schedule == crate::config::LrSchedule::Fixed {
+            if cfg.ppo.schedule == crate::rl::config::LrSchedule::Fixed {
                 // a fixed rate is the config's (a resume may change it)
                 ppo.opt.lr = cfg.ppo.learning_rate;
             }
@@ -520,41 +492,6 @@ pub fn learn<T: VecTask>(
     })
 }
 
-/// Draw `plots/training.png` from the run's `metrics.csv`.
-pub fn plot_run(run_dir: &Path) -> Result<PathBuf, crate::plot::PlotError> {
-    use crate::plot::Panel;
-    let x = "env_steps";
-    let panels = [
-        Panel::new("episode return (last 100)", x, &["mean_return"]),
-        Panel::new("episode length (steps)", x, &["mean_episode_length"]),
-        Panel::new("tracking error", x, &["vel_error_xy", "vel_error_yaw"]),
-        Panel::new("losses", x, &["value_loss", "surrogate_loss"]),
-        Panel::new("policy", x, &["mean_std", "kl", "clip_fraction"]),
-        Panel::new(
-            "falls and penalty scale",
-            x,
-            &["fall_fraction", "penalty_scale"],
-        ),
-        Panel::new("env-steps/s", x, &["env_steps_per_s"]),
-        Panel::new(
-            "seconds per iteration",
-            x,
-            &["time_physics_s", "time_inference_s", "time_update_s"],
-        ),
-        Panel::new("mean terrain level", x, &["terrain_level"]),
-    ];
-    crate::run::plot_training(run_dir, &panels)
-}
-
-/// Metrics columns of a task: [`COLUMNS`] then `rew_<term>`.
-pub fn columns(task: &dyn VecTask) -> Vec<String> {
-    COLUMNS
-        .iter()
-        .map(|c| c.to_string())
-        .chain(task.reward_names().iter().map(|n| format!("rew_{n}")))
-        .collect()
-}
-
 /// Build the config's task and train it in `run_dir` (fresh, or resumed from the
 /// run's latest checkpoint when `resume`). The G1 env or the cart-pole.
 pub fn train(
@@ -563,7 +500,7 @@ pub fn train(
     resume: bool,
     quiet: bool,
 ) -> Result<TrainSummary, RlError> {
-    use crate::config::TaskKind;
+    use crate::rl::config::TaskKind;
     match cfg.task {
         TaskKind::G1 => {
             let mut env = crate::env::VecEnv::new(&cfg.env)?;

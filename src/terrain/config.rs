@@ -37,9 +37,14 @@ impl Curriculum {
     fn check(&self, field: &str, min: f64) -> Result<(), TerrainError> {
         for (i, v) in self.0.iter().enumerate() {
             if !v.is_finite() || *v < min {
+                let bound = if min == f64::MIN_POSITIVE {
+                    "> 0".to_string()
+                } else {
+                    format!(">= {min}")
+                };
                 return Err(TerrainError::config(
                     format!("{field}[{i}]"),
-                    format!("{v} must be a finite number >= {min}"),
+                    format!("{v} must be a finite number {bound}"),
                 ));
             }
         }

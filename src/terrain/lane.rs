@@ -4,9 +4,10 @@
 //! in the first half of the walk and another in the second.
 use super::canvas::{samples, Canvas, Region};
 use super::config::difficulty;
-use super::map::{add_roughness, stream_rng, Layout, TileInfo, SPAWN_CLEARANCE};
+use super::map::{stream_rng, Layout, TileInfo};
+use super::shapes::add_roughness;
 use super::shapes::{draw, Ctx, TileParams};
-use super::{TerrainConfig, TerrainError, TerrainKind, TerrainMap, SPAWN_OFFSET};
+use super::{TerrainConfig, TerrainError, TerrainKind, TerrainMap, SPAWN_CLEARANCE, SPAWN_OFFSET};
 
 /// Plain ground kept past a lane's goal line (m).
 pub const LANE_TAIL: f64 = 1.0;

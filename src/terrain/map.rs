@@ -5,14 +5,10 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use super::canvas::{quantize, samples, Canvas};
-use super::shapes::TileParams;
+use super::shapes::{add_roughness, TileParams};
 use super::{TerrainConfig, TerrainError, TerrainKind, SPAWN_OFFSET};
 use crate::sim::HeightField;
 
-/// Metres between the spawn point and the first obstacle.
-pub(crate) const SPAWN_CLEARANCE: f64 = 0.5;
-/// Metres of plain ground kept at the end of a map tile.
-pub(crate) const END_CLEARANCE: f64 = 0.5;
 /// MuJoCo's heightfield base depth (`size[3]`), the box under the lowest point (m).
 pub const HFIELD_BASE: f64 = 1.0;
 /// The smallest elevation range given to MuJoCo (`size[2]`), for a flat map (m).
@@ -361,16 +357,4 @@ impl TerrainMap {
         )
         .expect("a terrain map has at least 2 x 2 samples and nrow * ncol values")
     }
-}
-
-/// The paper's base roughness `random(-a, a) * difficulty` plus the
-/// always-on floor, on the config's coarse grid.
-pub(crate) fn add_roughness<R: rand::Rng + ?Sized>(
-    c: &mut Canvas,
-    cfg: &TerrainConfig,
-    d: f64,
-    rng: &mut R,
-) {
-    let cell = c.cells(cfg.roughness_cell, 1);
-    c.add_roughness(cfg.base_roughness * d, cfg.min_roughness, cell, rng);
 }

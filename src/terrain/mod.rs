@@ -37,6 +37,10 @@ pub use shapes::{TileGrid, TileParams, Wave};
 
 /// Metres from a tile's (or lane's) start to the spawn point on its centre line.
 pub const SPAWN_OFFSET: f64 = 1.0;
+/// Metres between the spawn point and the first obstacle.
+pub(crate) const SPAWN_CLEARANCE: f64 = 0.5;
+/// Metres of plain ground kept at the end of a map tile.
+pub(crate) const END_CLEARANCE: f64 = 0.5;
 
 /// Everything the terrain module can fail with.
 #[derive(Debug, thiserror::Error)]

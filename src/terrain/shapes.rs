@@ -15,8 +15,9 @@ use serde::Serialize;
 
 use super::canvas::{quantize, samples, Canvas, Region};
 use super::config::difficulty;
-use super::map::{add_roughness, END_CLEARANCE, SPAWN_CLEARANCE};
-use super::{TerrainConfig, TerrainError, TerrainKind, SPAWN_OFFSET};
+use super::{
+    TerrainConfig, TerrainError, TerrainKind, END_CLEARANCE, SPAWN_CLEARANCE, SPAWN_OFFSET,
+};
 
 /// One sine of a wave tile: `amplitude * sin(2 pi / wavelength * (x cos(direction)
 /// + y sin(direction)) + phase)` in tile-local metres.
@@ -403,4 +404,16 @@ fn slope_bridge<R: Rng + ?Sized>(c: &mut Canvas, r: Region, ctx: &Ctx, rng: &mut
         amplitude,
         width: c.x(width),
     }
+}
+
+/// The paper's base roughness `random(-a, a) * difficulty` plus the
+/// always-on floor, on the config's coarse grid.
+pub(crate) fn add_roughness<R: rand::Rng + ?Sized>(
+    c: &mut Canvas,
+    cfg: &TerrainConfig,
+    d: f64,
+    rng: &mut R,
+) {
+    let cell = c.cells(cfg.roughness_cell, 1);
+    c.add_roughness(cfg.base_roughness * d, cfg.min_roughness, cell, rng);
 }

@@ -10,8 +10,8 @@ use tch::Device;
 use super::denoiser::{Denoiser, Normalizer};
 use super::WmError;
 use crate::checkpoint::NamedTensors;
-use crate::config::WorldModelConfig;
 use crate::data::Dims;
+use crate::world_model::config::WorldModelConfig;
 
 /// Bumped when the layout changes.
 pub const FORMAT: u32 = 1;
@@ -73,7 +73,7 @@ impl WmCheckpoint {
 
     /// The resolved config stored in the checkpoint.
     pub fn config(&self) -> Result<WorldModelConfig, WmError> {
-        Ok(crate::config::world_model_from_str(
+        Ok(crate::world_model::config::world_model_from_str(
             &self.meta().config,
             &format!("{} (stored config)", self.path().display()),
             &[],

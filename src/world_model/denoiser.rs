@@ -15,8 +15,8 @@
 use tch::nn::{self, Init, LinearConfig, Module};
 use tch::{Device, Kind, Tensor};
 
-use crate::config::ModelConfig;
 use crate::data::DatasetStats;
+use crate::world_model::config::ModelConfig;
 
 /// Per-dimension mean/std of states and scandots as tensors; a dimension with
 /// zero spread gets std 1 (it is constant: normalizing leaves it at 0).

@@ -16,7 +16,7 @@ use tch::{Device, Kind, Tensor};
 
 use super::rollout::TerrainSource;
 use super::WmError;
-use crate::config::ObservationConfig;
+use crate::env::config::ObservationConfig;
 use crate::env::obs::{scan_height, ANG_VEL, COMMAND, OBS_DIM, SCAN_DIM};
 
 /// A planar pose: world `x`, `y` (m) and yaw (rad).

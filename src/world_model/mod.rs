@@ -26,6 +26,7 @@
 use std::path::PathBuf;
 
 pub mod checkpoint;
+pub mod config;
 pub mod denoiser;
 pub mod eval;
 pub mod map_terrain;

@@ -19,7 +19,7 @@ use super::denoiser::{Denoiser, Normalizer};
 use super::sampler::{sample, Noise};
 use super::schedule::NoiseSchedule;
 use super::WmError;
-use crate::config::{SamplingConfig, WorldModelConfig};
+use crate::world_model::config::{SamplingConfig, WorldModelConfig};
 
 /// Where the scandots of each call come from.
 pub trait TerrainSource {

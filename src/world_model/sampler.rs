@@ -24,7 +24,7 @@ use tch::{Device, Tensor};
 
 use super::denoiser::Denoiser;
 use super::schedule::NoiseSchedule;
-use crate::config::{SamplerKind, SamplingConfig};
+use crate::world_model::config::{SamplerKind, SamplingConfig};
 
 /// A seeded source of standard-normal tensors (and uniform draws).
 pub struct Noise {

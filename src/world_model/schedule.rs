@@ -4,7 +4,7 @@
 //! sample). `q(x^n | x^0) = N(sqrt(alpha_bar_n) x^0, (1 - alpha_bar_n) I)`.
 use tch::{Kind, Tensor};
 
-use crate::config::{DiffusionConfig, ScheduleKind};
+use crate::world_model::config::{DiffusionConfig, ScheduleKind};
 
 /// Betas, alphas and their cumulative products for `N` steps.
 #[derive(Debug, Clone, PartialEq)]

@@ -11,10 +11,10 @@ use tch::{Device, Tensor};
 
 use super::denoiser::Normalizer;
 use super::WmError;
-use crate::config::WorldModelConfig;
 use crate::data::sample::splitmix64;
 use crate::data::window::FrameStream;
 use crate::data::{Dataset, Shuffle, Split, SplitSpec, Window, WindowSpec, Windows};
+use crate::world_model::config::WorldModelConfig;
 
 /// A batch of sequences as normalized tensors.
 pub struct SeqBatch {

@@ -30,11 +30,11 @@ use super::sampler::{sample, sample_from, Noise};
 use super::schedule::{rollout_probability, NoiseSchedule};
 use super::sequences::{validation_windows, SeqBatch, Sequences};
 use super::WmError;
-use crate::config::WorldModelConfig;
 use crate::data::sample::splitmix64;
 use crate::data::{Dataset, DatasetStats, Dims, ReadOptions, Split, SplitSpec};
 use crate::rl::optim::Adam;
 use crate::run::{latest_checkpoint, Progress, RunDir};
+use crate::world_model::config::WorldModelConfig;
 
 /// Columns of `metrics.csv` (validation columns are empty between validations).
 pub const COLUMNS: [&str; 16] = [

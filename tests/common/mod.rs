@@ -38,12 +38,12 @@ pub fn walker_path() -> std::path::PathBuf {
         .join("models/checkpoints/flat/checkpoints/latest.pt")
 }
 
-pub fn load_config(name: &str, sets: &[&str]) -> dreampolicy::config::ExperimentConfig {
+pub fn load_config(name: &str, sets: &[&str]) -> dreampolicy::rl::config::ExperimentConfig {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("configs")
         .join(name);
     let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
-    dreampolicy::config::load(&path, &sets).unwrap()
+    dreampolicy::rl::config::load(&path, &sets).unwrap()
 }
 
 /// Write shard 0 of a synthetic G1 dataset into `dir`: `n_envs` envs stepped

@@ -42,10 +42,10 @@ use super::checkpoint::WmCheckpoint;
 use super::rollout::WorldModel;
 use super::sampler::Noise;
 use super::WmError;
-use crate::config::{SamplerKind, SamplingConfig};
 use crate::data::sample::splitmix64;
 use crate::data::{Dataset, ReadOptions, SplitSpec};
 use crate::env::obs;
+use crate::world_model::config::{SamplerKind, SamplingConfig};
 
 pub mod episodes;
 mod plot;

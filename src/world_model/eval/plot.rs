@@ -9,11 +9,11 @@ use tch::Tensor;
 
 use super::episodes::{Pick, ValidationSet};
 use super::{roll_out, Ctx};
-use crate::config::{SamplerKind, SamplingConfig, WorldModelConfig};
 use crate::data::sample::splitmix64;
 use crate::env::obs;
 use crate::plot::{plot_series, SeriesPanel};
 use crate::robot::JOINT_NAMES;
+use crate::world_model::config::{SamplerKind, SamplingConfig, WorldModelConfig};
 use crate::world_model::WmError;
 
 /// Windows drawn.

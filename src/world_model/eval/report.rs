@@ -4,7 +4,7 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
-use crate::config::{SamplerKind, SamplingConfig};
+use crate::world_model::config::{SamplerKind, SamplingConfig};
 
 /// The validation side of the split, as read.
 #[derive(Debug, Clone, Serialize)]

@@ -2,7 +2,7 @@
 //! `VecEnv` implements it; so does the cart-pole of `env::cartpole`.
 use serde::{Deserialize, Serialize};
 
-use crate::env::{Outcome, StepInfo, VecEnv};
+use super::{Outcome, StepInfo, VecEnv};
 
 /// Sizes of a task's buffers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

@@ -3,7 +3,7 @@
 //! (one [`Panel`] each: named y columns against an x column, with a legend) into one
 //! PNG with a title; [`plot_series`] draws the same grid from in-memory lines.
 //!
-//! The CSV is what [`crate::run`] writes: a header row of column names, then rows of
+//! The CSV is what `run::RunDir` writes: a header row of column names, then rows of
 //! numbers (`NaN`, `inf` and empty fields are allowed; non-finite points are left
 //! out and break a line). A last line without its newline that does not parse is a
 //! row still being written and is skipped, so a live run can be plotted.
@@ -14,6 +14,9 @@
 //!
 //! Layout: panels of [`PANEL_SIZE`] pixels in a grid of [`grid`] columns and rows
 //! under a title band of [`TITLE_HEIGHT`] pixels; see [`image_size`].
+mod heatmap;
+pub use heatmap::heatmap;
+
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
@@ -297,15 +300,20 @@ pub fn plot_series(out_png: &Path, title: &str, panels: &[SeriesPanel]) -> Resul
 type PanelData<'a> = (&'a Panel, &'a [f64], Vec<&'a [f64]>);
 
 /// Draw `(panel, x, ys)` triples in a grid under a title band.
+/// A drawing backend's error while drawing `path`, as a [`PlotError`].
+fn draw_error(path: &Path) -> impl Fn(&dyn std::fmt::Display) -> PlotError + '_ {
+    move |e| PlotError::Draw {
+        path: path.into(),
+        message: e.to_string(),
+    }
+}
+
 fn draw_grid(out_png: &Path, title: &str, data: Vec<PanelData>) -> Result<(), PlotError> {
     register_font()?;
 
     let (w, h) = image_size(data.len());
     let mut rgb = vec![0u8; w as usize * h as usize * 3];
-    let draw_err = |e: &dyn std::fmt::Display| PlotError::Draw {
-        path: out_png.into(),
-        message: e.to_string(),
-    };
+    let draw_err = draw_error(out_png);
     {
         let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| draw_err(&e))?;
@@ -504,103 +512,4 @@ fn write_png(path: &Path, w: u32, h: u32, rgb: &[u8]) -> Result<(), PlotError> {
     encode().inspect_err(|_| {
         let _ = std::fs::remove_file(&tmp);
     })
-}
-
-/// A matrix of values in `[0, 1]` (success rates) as a PNG heatmap: one cell per
-/// (row, column), coloured from red (0) through yellow to green (1), with the
-/// value printed in it; NaN cells are grey.
-pub fn heatmap(
-    out_png: &Path,
-    title: &str,
-    rows: &[String],
-    cols: &[String],
-    values: &[Vec<f64>],
-) -> Result<(), PlotError> {
-    if rows.is_empty() || cols.is_empty() {
-        return Err(PlotError::NoPanels);
-    }
-    register_font()?;
-    let (cell_w, cell_h, left, top) = (130u32, 60u32, 170u32, 90u32);
-    let (w, h) = (
-        left + cell_w * cols.len() as u32 + 20,
-        top + cell_h * rows.len() as u32 + 20,
-    );
-    let mut rgb = vec![0u8; w as usize * h as usize * 3];
-    let draw_err = |e: &dyn std::fmt::Display| PlotError::Draw {
-        path: out_png.into(),
-        message: e.to_string(),
-    };
-    {
-        let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| draw_err(&e))?;
-        let font = ("sans-serif", 18).into_font();
-        let centered = |size: u32| {
-            ("sans-serif", size).into_font().color(&BLACK).pos(
-                plotters::style::text_anchor::Pos::new(
-                    plotters::style::text_anchor::HPos::Center,
-                    plotters::style::text_anchor::VPos::Center,
-                ),
-            )
-        };
-        root.draw(&Text::new(title.to_string(), (10, 10), ("sans-serif", 22)))
-            .map_err(|e| draw_err(&e))?;
-        for (j, c) in cols.iter().enumerate() {
-            let x = (left + cell_w * j as u32 + cell_w / 2) as i32;
-            root.draw(&Text::new(c.clone(), (x, top as i32 - 20), centered(18)))
-                .map_err(|e| draw_err(&e))?;
-        }
-        for (i, r) in rows.iter().enumerate() {
-            let y = (top + cell_h * i as u32) as i32;
-            root.draw(&Text::new(
-                r.clone(),
-                (10, y + cell_h as i32 / 2 - 9),
-                font.clone(),
-            ))
-            .map_err(|e| draw_err(&e))?;
-            for j in 0..cols.len() {
-                let v = values
-                    .get(i)
-                    .and_then(|r| r.get(j))
-                    .copied()
-                    .unwrap_or(f64::NAN);
-                let x = (left + cell_w * j as u32) as i32;
-                let color = if v.is_finite() {
-                    let t = v.clamp(0.0, 1.0);
-                    // red -> yellow -> green
-                    let (r, g) = if t < 0.5 {
-                        (230.0, 80.0 + 2.0 * t * 150.0)
-                    } else {
-                        (
-                            230.0 - 2.0 * (t - 0.5) * 170.0,
-                            230.0 - 2.0 * (t - 0.5) * 50.0,
-                        )
-                    };
-                    RGBColor(r as u8, g as u8, 80)
-                } else {
-                    RGBColor(200, 200, 200)
-                };
-                root.draw(&Rectangle::new(
-                    [
-                        (x + 1, y + 1),
-                        (x + cell_w as i32 - 1, y + cell_h as i32 - 1),
-                    ],
-                    color.filled(),
-                ))
-                .map_err(|e| draw_err(&e))?;
-                let label = if v.is_finite() {
-                    format!("{v:.2}")
-                } else {
-                    "-".into()
-                };
-                root.draw(&Text::new(
-                    label,
-                    (x + cell_w as i32 / 2, y + cell_h as i32 / 2),
-                    centered(20),
-                ))
-                .map_err(|e| draw_err(&e))?;
-            }
-        }
-        root.present().map_err(|e| draw_err(&e))?;
-    }
-    write_png(out_png, w, h, &rgb)
 }

@@ -7,7 +7,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use super::ConfigError;
+use crate::config::{parse, read, ConfigError};
 
 /// A whole world-model file. Only `data.path` is required.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -350,7 +350,7 @@ pub fn load_world_model(
     path: &Path,
     overrides: &[String],
 ) -> Result<WorldModelConfig, ConfigError> {
-    world_model_from_str(&super::read(path)?, &path.display().to_string(), overrides)
+    world_model_from_str(&read(path)?, &path.display().to_string(), overrides)
 }
 
 /// Like [`load_world_model`], from a string; `label` names it in messages.
@@ -359,7 +359,7 @@ pub fn world_model_from_str(
     label: &str,
     overrides: &[String],
 ) -> Result<WorldModelConfig, ConfigError> {
-    let cfg: WorldModelConfig = super::parse(text, label, overrides)?;
+    let cfg: WorldModelConfig = parse(text, label, overrides)?;
     cfg.validate()?;
     Ok(cfg)
 }

@@ -1,9 +1,70 @@
 //! Serde structs of the training sections: the actor-critic (`policy`), PPO
 //! (`ppo`), the run (`train`) and lane evaluation (`eval`). Defaults are the
-//! paper's values (appendix, "Details of Specialized Policy Learning").
+//! paper's values (appendix, "Details of Specialized Policy Learning"). With
+//! the `env` section ([`crate::env::config`]) they make an experiment file,
+//! [`ExperimentConfig`], loaded by [`load`].
 use serde::{Deserialize, Serialize};
 
-use super::ConfigError;
+use std::path::Path;
+
+use crate::config::{parse, read, ConfigError};
+use crate::env::config::EnvConfig;
+
+/// A whole experiment file. Sections other than `env` have defaults (the paper's).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExperimentConfig {
+    /// What the trainer steps: the G1 locomotion env (default) or the cart-pole.
+    #[serde(default)]
+    pub task: TaskKind,
+    pub env: EnvConfig,
+    #[serde(default)]
+    pub policy: PolicyConfig,
+    #[serde(default)]
+    pub ppo: PpoConfig,
+    #[serde(default)]
+    pub train: TrainConfig,
+    #[serde(default)]
+    pub eval: EvalConfig,
+}
+
+/// The environment a config trains on.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TaskKind {
+    /// The G1 on a plane or a terrain map (`env` configures it).
+    #[default]
+    G1,
+    /// MuJoCo cart-pole balancing (`env.n_envs`, `env.seed` only): tests PPO.
+    Cartpole,
+}
+
+impl ExperimentConfig {
+    /// Validate every section.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        self.env.validate()?;
+        self.policy.validate()?;
+        self.ppo.validate()?;
+        self.train.validate()?;
+        self.eval.validate()
+    }
+}
+
+/// Read `path`, apply `--set key.path=value` overrides, deserialize, validate.
+pub fn load(path: &Path, overrides: &[String]) -> Result<ExperimentConfig, ConfigError> {
+    from_str(&read(path)?, &path.display().to_string(), overrides)
+}
+
+/// Like [`load`], from a string; `label` names it in messages.
+pub fn from_str(
+    text: &str,
+    label: &str,
+    overrides: &[String],
+) -> Result<ExperimentConfig, ConfigError> {
+    let cfg: ExperimentConfig = parse(text, label, overrides)?;
+    cfg.validate()?;
+    Ok(cfg)
+}
 
 /// Actor-critic structure: `a_t = F(E_hist(o_hist), E_scan(scan), o_t)` where
 /// `o_t` (98 floats) holds proprioception, command and last action.

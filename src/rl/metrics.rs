@@ -1,0 +1,70 @@
+//! What a PPO run logs: the `metrics.csv` columns (the fixed ones, then one
+//! `rew_<term>` per reward term) and the panels of `plots/training.png`.
+use std::path::{Path, PathBuf};
+
+use crate::env::task::VecTask;
+
+/// Columns of `metrics.csv` before the per-term rewards (`rew_<term>`).
+pub const COLUMNS: [&str; 26] = [
+    "iteration",
+    "env_steps",
+    "wall_time_s",
+    "mean_return",
+    "mean_episode_length",
+    "episodes",
+    "fall_fraction",
+    "vel_error_xy",
+    "vel_error_yaw",
+    "value_loss",
+    "surrogate_loss",
+    "entropy",
+    "kl",
+    "clip_fraction",
+    "explained_variance",
+    "learning_rate",
+    "mean_std",
+    "grad_norm",
+    "env_steps_per_s",
+    "time_physics_s",
+    "time_inference_s",
+    "time_update_s",
+    "terrain_level",
+    "blowups",
+    "mean_step_reward",
+    "penalty_scale",
+];
+
+/// Draw `plots/training.png` from the run's `metrics.csv`.
+pub fn plot_run(run_dir: &Path) -> Result<PathBuf, crate::plot::PlotError> {
+    use crate::plot::Panel;
+    let x = "env_steps";
+    let panels = [
+        Panel::new("episode return (last 100)", x, &["mean_return"]),
+        Panel::new("episode length (steps)", x, &["mean_episode_length"]),
+        Panel::new("tracking error", x, &["vel_error_xy", "vel_error_yaw"]),
+        Panel::new("losses", x, &["value_loss", "surrogate_loss"]),
+        Panel::new("policy", x, &["mean_std", "kl", "clip_fraction"]),
+        Panel::new(
+            "falls and penalty scale",
+            x,
+            &["fall_fraction", "penalty_scale"],
+        ),
+        Panel::new("env-steps/s", x, &["env_steps_per_s"]),
+        Panel::new(
+            "seconds per iteration",
+            x,
+            &["time_physics_s", "time_inference_s", "time_update_s"],
+        ),
+        Panel::new("mean terrain level", x, &["terrain_level"]),
+    ];
+    crate::run::plot_training(run_dir, &panels)
+}
+
+/// Metrics columns of a task: [`COLUMNS`] then `rew_<term>`.
+pub fn columns(task: &dyn VecTask) -> Vec<String> {
+    COLUMNS
+        .iter()
+        .map(|c| c.to_string())
+        .chain(task.reward_names().iter().map(|n| format!("rew_{n}")))
+        .collect()
+}
