@@ -22,6 +22,7 @@ pub mod checkpoint;
 pub mod collect;
 pub mod config;
 pub mod data;
+pub mod deploy;
 pub mod env;
 pub mod eval;
 pub mod play;

@@ -1,4 +1,5 @@
-//! `dreampolicy export`: a checkpoint's actor as TorchScript.
+//! `dreampolicy export`: a checkpoint as a deployment bundle (TorchScript policy
+//! and `deploy.yaml`), or with `--torchscript-only` the TorchScript file alone.
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
@@ -8,13 +9,23 @@ use anyhow::{Context, Result};
 pub struct ExportArgs {
     #[arg(long)]
     checkpoint: PathBuf,
+    /// The bundle directory (created): `policy.pt` and `deploy.yaml`; with
+    /// --torchscript-only, the TorchScript file to write
     #[arg(long)]
     out: PathBuf,
+    /// Write only the TorchScript file (no bundle)
+    #[arg(long)]
+    torchscript_only: bool,
 }
 
 pub fn run(a: ExportArgs) -> Result<()> {
     let ck = dreampolicy::rl::checkpoint::Checkpoint::read(&a.checkpoint)?;
-    let info = dreampolicy::rl::export::export(&ck, &a.out).context("export")?;
-    println!("{}", serde_json::to_string(&info)?);
+    if a.torchscript_only {
+        let info = dreampolicy::rl::export::export(&ck, &a.out).context("export")?;
+        println!("{}", serde_json::to_string(&info)?);
+    } else {
+        let info = dreampolicy::deploy::write_bundle(&ck, &a.out).context("export")?;
+        println!("{}", serde_json::to_string(&info)?);
+    }
     Ok(())
 }

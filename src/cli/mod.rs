@@ -7,6 +7,7 @@ use clap::{Parser, Subcommand};
 mod bench;
 mod collect;
 mod data;
+mod deploy;
 mod eval;
 mod eval_wm;
 mod export;
@@ -56,8 +57,13 @@ enum Command {
     Play(play::PlayArgs),
     /// Draw a run directory's training curves (plots/training.png) from its metrics.csv.
     Plot(plot::PlotArgs),
-    /// Export a checkpoint's actor (normalization included) as TorchScript.
+    /// Export a checkpoint as a deployment bundle: the actor (normalization
+    /// included) as TorchScript and deploy.yaml, the observation and action
+    /// contract a controller needs
     Export(export::ExportArgs),
+    /// Walk a deployment bundle in a MuJoCo scene through the bundle alone (no
+    /// training env): sensors in, joint targets out
+    DeploySim(deploy::DeploySimArgs),
     /// Procedural terrains.
     #[command(subcommand)]
     Terrain(terrain::TerrainCommand),
@@ -82,6 +88,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Play(a) => play::run(a),
         Command::Plot(a) => plot::run(a),
         Command::Export(a) => export::run(a),
+        Command::DeploySim(a) => deploy::run(a),
         Command::Terrain(which) => terrain::run(which),
         Command::Data(which) => data::run(which),
     }

@@ -240,6 +240,9 @@ impl LocoEnv {
         self.state.terrain_level = self.level;
         self.resample_command(sh);
         self.derive_state(sh);
+        // in heading mode the yaw rate follows the heading rule from the first
+        // observation on (not the draw above), on this episode's yaw
+        self.steer_heading(sh);
         self.state.feet_vel = [[0.0; 3]; 2];
         self.state.gait_phase = 0.0;
         self.state.last_qd = self.state.qd;
@@ -340,6 +343,7 @@ impl LocoEnv {
         let k = self.step_in_episode;
         if k.is_multiple_of(sh.resample_steps) {
             self.resample_command(sh);
+            self.steer_heading(sh);
         }
         if sh.push_steps > 0 && k.is_multiple_of(sh.push_steps) {
             let v = sh.cfg.domain_rand.max_push_vel;
@@ -400,7 +404,9 @@ impl LocoEnv {
         let qpos = d.qpos();
         let qvel = d.qvel();
         s.base_pos = [qpos[0], qpos[1], qpos[2]];
-        s.base_rot = d.xmat()[g1.pelvis];
+        // the orientation after the last physics step, as the IMU reads it (xmat
+        // is the kinematics computed at the start of that step, 5 ms older)
+        s.base_rot = crate::sim::quat_to_mat([qpos[3], qpos[4], qpos[5], qpos[6]]);
         s.base_lin_vel_world = [qvel[0], qvel[1], qvel[2]];
         s.base_lin_vel = rotate_inv(&s.base_rot, s.base_lin_vel_world);
         s.base_ang_vel = [qvel[3], qvel[4], qvel[5]];

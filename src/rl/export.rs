@@ -78,3 +78,87 @@ pub fn export(ck: &Checkpoint, out: &Path) -> Result<ExportInfo, RlError> {
         uses_scan,
     })
 }
+
+/// What [`export_npz`] wrote: the actor's layers for a NumPy forward pass.
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct NpzPolicy {
+    /// File name of the `.npz` (beside `deploy.yaml`).
+    pub file: String,
+    /// `elu`, `relu` or `tanh`, after every hidden layer and every encoder layer.
+    pub activation: String,
+    /// `none`, `mlp` or `gru` (the NumPy deployer runs `none` and `mlp`).
+    pub history: String,
+    /// Linear layers `<name>.<i>.weight` `[out, in]` and `.bias` of the history
+    /// encoder (`hist`), the scan encoder (`scan_actor`) and the actor (`actor`):
+    /// how many each has. The actor's input is `[hist(history flattened),
+    /// scan_actor(scan), obs]`; its last layer has no activation.
+    pub hist_layers: usize,
+    pub scan_layers: usize,
+    pub actor_layers: usize,
+    /// Inputs are normalized as `clip((x - mean) / std, -clip, clip)` with the
+    /// arrays `obs_mean`, `obs_std` (history entries too) and `scan_mean`,
+    /// `scan_std`, when `normalize` is true.
+    pub normalize: bool,
+    pub obs_clip: f64,
+    pub scan_clip: f64,
+}
+
+/// Write the checkpoint's actor as NumPy arrays (`.npz`), for deployers without
+/// libtorch. Same function as [`export`]'s TorchScript.
+pub fn export_npz(ck: &Checkpoint, out: &Path) -> Result<NpzPolicy, RlError> {
+    let cfg = ck.config()?;
+    let mut agent = Agent::new(&cfg.policy, ck.meta.dims, 1, cfg.ppo.normalize_obs);
+    ck.load_agent(&mut agent)?;
+    let (om, os) = agent.obs_norm.tensors();
+    let (sm, ss) = agent.scan_norm.tensors();
+    let mut named: Vec<(String, Tensor)> = vec![
+        ("obs_mean".into(), om),
+        ("obs_std".into(), os),
+        ("scan_mean".into(), sm),
+        ("scan_std".into(), ss),
+    ];
+    let vars = agent.policy.vs.variables();
+    let count = |prefix: &str| {
+        vars.keys()
+            .filter(|k| k.starts_with(prefix) && k.ends_with(".weight"))
+            .count()
+    };
+    let (hist_layers, scan_layers, actor_layers) =
+        (count("hist."), count("scan_actor."), count("actor."));
+    let mut keys: Vec<&String> = vars
+        .keys()
+        .filter(|k| {
+            k.starts_with("hist.") || k.starts_with("scan_actor.") || k.starts_with("actor.")
+        })
+        .collect();
+    keys.sort();
+    for k in keys {
+        named.push((k.clone(), vars[k].to_kind(Kind::Float).detach()));
+    }
+    let named: Vec<(String, Tensor)> = named
+        .into_iter()
+        .map(|(n, t)| (n, t.to_kind(Kind::Float).contiguous()))
+        .collect();
+    Tensor::write_npz(&named, out)?;
+    let pc = &cfg.policy;
+    let uses_scan = agent.policy.uses_scan();
+    Ok(NpzPolicy {
+        file: out
+            .file_name()
+            .map(|f| f.to_string_lossy().into_owned())
+            .unwrap_or_default(),
+        activation: format!("{:?}", pc.activation).to_lowercase(),
+        history: if agent.policy.history_len() == 0 {
+            "none".into()
+        } else {
+            format!("{:?}", pc.history.kind).to_lowercase()
+        },
+        hist_layers,
+        scan_layers: if uses_scan { scan_layers } else { 0 },
+        actor_layers,
+        normalize: agent.normalize,
+        obs_clip: agent.obs_norm.clip as f64,
+        scan_clip: agent.scan_norm.clip as f64,
+    })
+}

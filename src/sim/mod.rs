@@ -15,6 +15,23 @@ pub use error::{Instability, SimError};
 pub use hfield::HeightField;
 pub use model::{HfieldInfo, Model, ObjType};
 
+/// Rotation matrix (row-major, as MuJoCo's `xmat`) of a unit quaternion
+/// `(w, x, y, z)`, as MuJoCo's `mju_quat2Mat`.
+pub fn quat_to_mat(q: [f64; 4]) -> [f64; 9] {
+    let [w, x, y, z] = q;
+    [
+        1.0 - 2.0 * (y * y + z * z),
+        2.0 * (x * y - w * z),
+        2.0 * (x * z + w * y),
+        2.0 * (x * y + w * z),
+        1.0 - 2.0 * (x * x + z * z),
+        2.0 * (y * z - w * x),
+        2.0 * (x * z - w * y),
+        2.0 * (y * z + w * x),
+        1.0 - 2.0 * (x * x + y * y),
+    ]
+}
+
 /// Version of the linked libmujoco, e.g. "2.2.2".
 pub fn mujoco_version() -> String {
     // SAFETY: mj_versionString returns a static NUL-terminated string.
