@@ -149,6 +149,33 @@ fn broken_bundles_are_one_line_errors() {
     assert_eq!(b.policy.file, "policy.pt");
     assert!(b.eval.is_some(), "the walker's eval.json is in the bundle");
 
+    // the CLI writes the same bundle, or the TorchScript file alone
+    let cli = dir.0.join("cli-bundle");
+    let out = run_ok(
+        Command::new(env!("CARGO_BIN_EXE_dreampolicy"))
+            .arg("export")
+            .arg("--checkpoint")
+            .arg(walker_path())
+            .arg("--out")
+            .arg(&cli),
+    );
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["history_len"], 5);
+    for f in ["deploy.yaml", "policy.pt", "policy.npz"] {
+        assert!(cli.join(f).is_file(), "{f} missing");
+    }
+    let alone = dir.0.join("alone.pt");
+    run_ok(
+        Command::new(env!("CARGO_BIN_EXE_dreampolicy"))
+            .arg("export")
+            .arg("--checkpoint")
+            .arg(walker_path())
+            .arg("--out")
+            .arg(&alone)
+            .arg("--torchscript-only"),
+    );
+    assert!(tch::CModule::load(&alone).is_ok());
+
     let err = |d: &std::path::Path| Controller::load(d, None).err().unwrap().to_string();
     // no bundle there
     let e = err(&dir.0.join("nowhere"));
