@@ -10,7 +10,7 @@ use tch::{CModule, Kind, Tensor};
 
 use super::bundle::{Bundle, ObsField};
 use super::DeployError;
-pub use crate::sim::quat_to_mat;
+pub use crate::sim::{quat_to_mat, wrap_angle};
 
 /// One control step's measurements.
 #[derive(Debug, Clone)]
@@ -28,11 +28,6 @@ pub struct Sensors {
 pub fn yaw_of(q: [f64; 4]) -> f64 {
     let r = quat_to_mat(q);
     r[3].atan2(r[0])
-}
-
-/// `a` wrapped into `[-pi, pi)`.
-pub fn wrap(a: f64) -> f64 {
-    (a + PI).rem_euclid(2.0 * PI) - PI
 }
 
 /// The bundle's policy with its history, last action and gait clock.
@@ -101,7 +96,7 @@ impl Controller {
     /// on the measured yaw.
     pub fn heading_command(&self, quat: [f64; 4], vx: f64, vy: f64, heading: f64) -> [f64; 3] {
         let c = &self.bundle.commands;
-        let w = c.heading_stiffness * wrap(heading - yaw_of(quat));
+        let w = c.heading_stiffness * wrap_angle(heading - yaw_of(quat));
         [vx, vy, w.clamp(c.ang_vel_yaw[0], c.ang_vel_yaw[1])]
     }
 

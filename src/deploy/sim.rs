@@ -94,11 +94,16 @@ fn resolve(model: &Model, c: &Controller, scene: &Path) -> Result<Handles, Deplo
     Ok(h)
 }
 
+/// Pelvis position and orientation `(w, x, y, z)`: the free joint's qpos.
+fn pelvis(d: &Data, h: &Handles) -> ([f64; 3], [f64; 4]) {
+    let q = &d.qpos()[h.free_qpos..h.free_qpos + 7];
+    ([q[0], q[1], q[2]], [q[3], q[4], q[5], q[6]])
+}
+
 fn sensors(d: &Data, h: &Handles) -> Sensors {
     let (qpos, qvel) = (d.qpos(), d.qvel());
-    let f = h.free_qpos;
     Sensors {
-        quat: [qpos[f + 3], qpos[f + 4], qpos[f + 5], qpos[f + 6]],
+        quat: pelvis(d, h).1,
         // MuJoCo's free-joint angular velocity is in the body frame, as a gyro's
         gyro: [
             qvel[h.free_dof + 3],
@@ -165,7 +170,7 @@ pub fn deploy_sim(dir: &Path, o: &DeploySimOptions) -> Result<DeploySummary, Dep
     c.reset();
     let scan_spec = c.bundle.scan.clone();
     let steps = (o.seconds / t.control_dt).round().max(1.0) as u64;
-    let x0 = d.qpos()[h.free_qpos];
+    let x0 = pelvis(&d, &h).0[0];
     let mut err_sum = 0.0;
     let mut fell_at = None;
     let mut done = 0;
@@ -173,8 +178,7 @@ pub fn deploy_sim(dir: &Path, o: &DeploySimOptions) -> Result<DeploySummary, Dep
     for step in 0..steps {
         let s = sensors(&d, &h);
         let cmd = c.heading_command(s.quat, o.speed, 0.0, 0.0);
-        let f = h.free_qpos;
-        let base = [d.qpos()[f], d.qpos()[f + 1], d.qpos()[f + 2]];
+        let base = pelvis(&d, &h).0;
         if c.bundle.policy.uses_scan {
             let (sy, cy) = yaw_of(s.quat).sin_cos();
             for (k, v) in scan.iter_mut().enumerate() {
@@ -202,23 +206,17 @@ pub fn deploy_sim(dir: &Path, o: &DeploySimOptions) -> Result<DeploySummary, Dep
         done = step + 1;
         let v = d.qvel();
         err_sum += (v[h.free_dof] - cmd[0]).hypot(v[h.free_dof + 1] - cmd[1]);
-        let r = quat_to_mat([
-            d.qpos()[f + 3],
-            d.qpos()[f + 4],
-            d.qpos()[f + 5],
-            d.qpos()[f + 6],
-        ]);
-        let (bx, by, bz) = (d.qpos()[f], d.qpos()[f + 1], d.qpos()[f + 2]);
+        let ([bx, by, bz], quat) = pelvis(&d, &h);
         let height = bz - ground_height(&d, bx, by, bz + 2.0);
-        let tilted = r[8] < FALL_TILT_DEG.to_radians().cos();
+        let tilted = quat_to_mat(quat)[8] < FALL_TILT_DEG.to_radians().cos();
         if height < FALL_HEIGHT || tilted {
             fell_at = Some(done as f64 * t.control_dt);
             break;
         }
     }
     let seconds = done as f64 * t.control_dt;
-    let distance = d.qpos()[h.free_qpos] - x0;
-    let q = &d.qpos()[h.free_qpos + 3..h.free_qpos + 7];
+    let (end, quat) = pelvis(&d, &h);
+    let distance = end[0] - x0;
     Ok(DeploySummary {
         scene: scene.display().to_string(),
         mujoco_version: crate::sim::mujoco_version(),
@@ -228,7 +226,7 @@ pub fn deploy_sim(dir: &Path, o: &DeploySimOptions) -> Result<DeploySummary, Dep
         mean_forward_speed: distance / seconds,
         commanded_speed: o.speed,
         vel_tracking_error: err_sum / done.max(1) as f64,
-        final_yaw_deg: yaw_of([q[0], q[1], q[2], q[3]]).to_degrees(),
+        final_yaw_deg: yaw_of(quat).to_degrees(),
         fell: fell_at.is_some(),
         fell_at_s: fell_at,
         observation_noise: o.noise_seed.is_some(),

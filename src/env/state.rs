@@ -111,13 +111,4 @@ pub fn rpy(r: &[f64; 9]) -> [f64; 3] {
     ]
 }
 
-/// Wrap an angle to (-pi, pi].
-#[inline]
-pub fn wrap_angle(a: f64) -> f64 {
-    let two_pi = 2.0 * std::f64::consts::PI;
-    let mut x = (a + std::f64::consts::PI) % two_pi;
-    if x < 0.0 {
-        x += two_pi;
-    }
-    x - std::f64::consts::PI
-}
+pub use crate::sim::wrap_angle;

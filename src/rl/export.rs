@@ -10,6 +10,7 @@ use tch::{Kind, Tensor};
 
 use super::agent::Agent;
 use super::checkpoint::Checkpoint;
+use super::config::ExperimentConfig;
 use super::RlError;
 
 /// What an export wrote.
@@ -32,11 +33,18 @@ fn normalize(x: &Tensor, mean: &Tensor, std: &Tensor, clip: f64, on: bool) -> Te
     }
 }
 
-/// Trace the checkpoint's actor into a TorchScript file at `out`.
-pub fn export(ck: &Checkpoint, out: &Path) -> Result<ExportInfo, RlError> {
+/// The checkpoint's config and its agent (one env's buffers), weights and
+/// normalizers loaded: what both exports read.
+fn checkpoint_agent(ck: &Checkpoint) -> Result<(ExperimentConfig, Agent), RlError> {
     let cfg = ck.config()?;
     let mut agent = Agent::new(&cfg.policy, ck.meta.dims, 1, cfg.ppo.normalize_obs);
     ck.load_agent(&mut agent)?;
+    Ok((cfg, agent))
+}
+
+/// Trace the checkpoint's actor into a TorchScript file at `out`.
+pub fn export(ck: &Checkpoint, out: &Path) -> Result<ExportInfo, RlError> {
+    let (_, mut agent) = checkpoint_agent(ck)?;
     // traced weights become constants of the graph: they must not require grad
     agent.policy.vs.freeze();
     let d = agent.dims();
@@ -107,9 +115,7 @@ pub struct NpzPolicy {
 /// Write the checkpoint's actor as NumPy arrays (`.npz`), for deployers without
 /// libtorch. Same function as [`export`]'s TorchScript.
 pub fn export_npz(ck: &Checkpoint, out: &Path) -> Result<NpzPolicy, RlError> {
-    let cfg = ck.config()?;
-    let mut agent = Agent::new(&cfg.policy, ck.meta.dims, 1, cfg.ppo.normalize_obs);
-    ck.load_agent(&mut agent)?;
+    let (cfg, agent) = checkpoint_agent(ck)?;
     let (om, os) = agent.obs_norm.tensors();
     let (sm, ss) = agent.scan_norm.tensors();
     let mut named: Vec<(String, Tensor)> = vec![
@@ -134,7 +140,7 @@ pub fn export_npz(ck: &Checkpoint, out: &Path) -> Result<NpzPolicy, RlError> {
         .collect();
     keys.sort();
     for k in keys {
-        named.push((k.clone(), vars[k].to_kind(Kind::Float).detach()));
+        named.push((k.clone(), vars[k].detach()));
     }
     let named: Vec<(String, Tensor)> = named
         .into_iter()

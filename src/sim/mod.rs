@@ -32,6 +32,17 @@ pub fn quat_to_mat(q: [f64; 4]) -> [f64; 9] {
     ]
 }
 
+/// Wrap an angle to [-pi, pi).
+#[inline]
+pub fn wrap_angle(a: f64) -> f64 {
+    let two_pi = 2.0 * std::f64::consts::PI;
+    let mut x = (a + std::f64::consts::PI) % two_pi;
+    if x < 0.0 {
+        x += two_pi;
+    }
+    x - std::f64::consts::PI
+}
+
 /// Version of the linked libmujoco, e.g. "2.2.2".
 pub fn mujoco_version() -> String {
     // SAFETY: mj_versionString returns a static NUL-terminated string.
