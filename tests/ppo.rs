@@ -261,7 +261,11 @@ fn symmetry_augmentation_trains_the_g1_and_is_refused_for_the_cartpole() {
     let dir = Scratch::new("sym");
     let cfg = load_config(
         "test/g1_tiny.yaml",
-        &["ppo.symmetry=true", "train.iterations=2"],
+        &[
+            "ppo.symmetry=true",
+            "ppo.mirror_loss_coef=1.0",
+            "train.iterations=2",
+        ],
     );
     let s = runner::train(&cfg, &dir.0.join("g1"), false, true).unwrap();
     assert_eq!(s.iterations, 2);
@@ -273,6 +277,47 @@ fn symmetry_augmentation_trains_the_g1_and_is_refused_for_the_cartpole() {
         .unwrap()
         .to_string();
     assert!(e.contains("symmetry"), "{e}");
+}
+
+#[test]
+fn symmetry_augmentation_measures_kl_on_the_original_samples() {
+    // The committed walker is not left/right symmetric: its mirrored actions are
+    // far from the mirror of its old means. The KL that steers the learning
+    // rate is measured on the original samples (rsl_rl), so fine-tuning it with
+    // symmetry reads the same small KL as without; measured over the mirrored
+    // half too it read ~100 and the adaptive rate fell to its floor.
+    let _t = torch_lock();
+    let dir = Scratch::new("sym_kl");
+    let walker = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("models/checkpoints/flat/checkpoints/latest.pt");
+    let init = format!("train.init_checkpoint={}", walker.display());
+    let mut kls = Vec::new();
+    for sym in ["false", "true"] {
+        let sym = format!("ppo.symmetry={sym}");
+        let cfg = load_config(
+            "specialist/flat.yaml",
+            &[
+                &init,
+                &sym,
+                "env.n_envs=8",
+                "ppo.num_steps=8",
+                "ppo.num_epochs=2",
+                "ppo.num_minibatches=1",
+                "train.iterations=1",
+                "ppo.schedule=fixed",
+                // MuJoCo 2.2.2 (CI) has no implicitfast
+                "env.sim.integrator=implicit",
+            ],
+        );
+        let out = dir.0.join(&sym);
+        runner::train(&cfg, &out, false, true).unwrap();
+        kls.push(column(&out, "kl")[0]);
+    }
+    assert!(kls.iter().all(|k| k.is_finite()), "{kls:?}");
+    assert!(
+        kls[1] < 2.0 * kls[0] + 0.05,
+        "without, with symmetry: {kls:?}"
+    );
 }
 
 #[test]

@@ -187,6 +187,11 @@ pub struct PpoConfig {
     /// mirror image (observations, actions, old means), with the same advantages
     /// and returns (rsl_rl's data augmentation; G1 tasks only).
     pub symmetry: bool,
+    /// With `symmetry`: weight of rsl_rl's mirror loss, the mean squared
+    /// difference between the policy's mean on a mirrored observation and the
+    /// mirror of its (detached) mean on the original. 0 leaves it out.
+    #[serde(default)]
+    pub mirror_loss_coef: f64,
 }
 
 impl Default for PpoConfig {
@@ -208,6 +213,7 @@ impl Default for PpoConfig {
             desired_kl: 0.01,
             normalize_obs: true,
             symmetry: false,
+            mirror_loss_coef: 0.0,
         }
     }
 }
@@ -351,6 +357,15 @@ impl PpoConfig {
         }
         if self.desired_kl.is_nan() || self.desired_kl <= 0.0 {
             return bad("ppo.desired_kl must be positive".into());
+        }
+        if self.mirror_loss_coef.is_nan()
+            || self.mirror_loss_coef < 0.0
+            || (self.mirror_loss_coef > 0.0 && !self.symmetry)
+        {
+            return bad(format!(
+                "ppo.mirror_loss_coef must be >= 0 and needs ppo.symmetry: true, got {}",
+                self.mirror_loss_coef
+            ));
         }
         Ok(())
     }

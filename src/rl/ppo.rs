@@ -27,6 +27,8 @@ pub struct Losses {
     pub learning_rate: f64,
     pub grad_norm: f64,
     pub mean_std: f64,
+    /// Mean mirror loss (0 without `ppo.mirror_loss_coef`).
+    pub mirror: f64,
 }
 
 /// PPO: its hyperparameters and optimizer.
@@ -117,7 +119,12 @@ impl Ppo {
         };
 
         // symmetry augmentation: the batch and its mirror image, with the same
-        // advantages, returns, values and old log-probabilities
+        // advantages, returns, values and old log-probabilities (rsl_rl). The
+        // KL that steers the learning rate is measured on the original samples
+        // only, as rsl_rl does: the mirrored ones are compared with the mirror
+        // of the old mean, which an asymmetric policy is far from (a G1 walker
+        // fine-tuned with it read KL ~100 and the rate fell to its floor).
+        let b_orig = b;
         let mut b = b;
         if let Some([ma, mc, ms, mact]) = &self.mirror {
             actor_in = with_mirror(&actor_in, ma);
@@ -155,12 +162,17 @@ impl Ppo {
                 // KL(old || new) of diagonal Gaussians, and the adaptive learning rate
                 let kl = tch::no_grad(|| {
                     let om = pick(&old_mean);
-                    ((&std / &old_std).log()
+                    let per_sample = ((&std / &old_std).log()
                         + (old_std.square() + (om - &mean).square()) / (std.square() * 2.0)
                         - 0.5)
-                        .sum_dim_intlist(-1, false, Kind::Float)
-                        .mean(Kind::Float)
-                        .double_value(&[])
+                        .sum_dim_intlist(-1, false, Kind::Float);
+                    let original = idx.lt(b_orig).to_kind(Kind::Float);
+                    let n = original.sum(Kind::Float).double_value(&[]);
+                    if n > 0.0 {
+                        (per_sample * &original).sum(Kind::Float).double_value(&[]) / n
+                    } else {
+                        0.0
+                    }
                 });
                 if c.schedule == LrSchedule::Adaptive {
                     self.adapt_lr(kl);
@@ -182,7 +194,22 @@ impl Ppo {
                 } else {
                     (&value - &ret).square().mean(Kind::Float)
                 };
-                let loss = &surrogate + &value_loss * c.value_loss_coef - &entropy * c.entropy_coef;
+                let mut loss =
+                    &surrogate + &value_loss * c.value_loss_coef - &entropy * c.entropy_coef;
+                // rsl_rl's mirror loss: each sample's mean against the mirror of
+                // its partner's (the same state mirrored), detached
+                if let (Some([_, _, _, mact]), true) = (&self.mirror, c.mirror_loss_coef > 0.0) {
+                    let partner = (&idx + b_orig).remainder(b);
+                    let target = tch::no_grad(|| {
+                        let pick_p = |t: &Tensor| t.index_select(0, &partner);
+                        let m = policy
+                            .actor_mean(&pick_p(&actor_in), scan.as_ref().map(pick_p).as_ref());
+                        m.index_select(1, &mact.0) * &mact.1
+                    });
+                    let mirror_loss = (&mean - target).square().mean(Kind::Float);
+                    l.mirror += mirror_loss.double_value(&[]);
+                    loss += mirror_loss * c.mirror_loss_coef;
+                }
                 self.opt.zero_grad();
                 loss.backward();
                 l.grad_norm += self.opt.clip_grad_norm(c.max_grad_norm);
@@ -211,6 +238,7 @@ impl Ppo {
             &mut l.kl,
             &mut l.clip_fraction,
             &mut l.grad_norm,
+            &mut l.mirror,
         ] {
             *v /= count;
         }
