@@ -40,6 +40,18 @@ fn every_shipped_config_loads() {
             );
             continue;
         }
+        // configs/sim2sim/ holds sim-to-sim matrices: every cell applies to a
+        // walker's eval env
+        if f.parent().is_some_and(|d| d.ends_with("sim2sim")) {
+            use dreampolicy::eval::sim2sim;
+            let c = sim2sim::load(f).unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+            let flat = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/specialist/flat.yaml");
+            let env = dreampolicy::rl::config::load(&flat, &[]).unwrap().env;
+            for cell in &c.cells {
+                sim2sim::cell_env(&env, cell).unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+            }
+            continue;
+        }
         dreampolicy::rl::config::load(f, &[]).unwrap_or_else(|e| panic!("{}: {e}", f.display()));
     }
     // and a typo in a training section is refused with the key named

@@ -15,6 +15,7 @@ mod info;
 mod play;
 mod plot;
 mod rollout;
+mod sim2sim;
 mod terrain;
 mod train;
 
@@ -64,6 +65,11 @@ enum Command {
     /// Walk a deployment bundle in a MuJoCo scene through the bundle alone (no
     /// training env): sensors in, joint targets out
     DeploySim(deploy::DeploySimArgs),
+    /// Evaluate a checkpoint across a sim-to-sim matrix (configs/sim2sim/):
+    /// timestep, integrator, solver, collisions, friction, mass, motors,
+    /// latency, noise, other MuJoCo builds and the stock Python deployer;
+    /// writes JSON, a Markdown table and a heatmap PNG
+    Sim2sim(sim2sim::Sim2SimArgs),
     /// Procedural terrains.
     #[command(subcommand)]
     Terrain(terrain::TerrainCommand),
@@ -89,6 +95,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Plot(a) => plot::run(a),
         Command::Export(a) => export::run(a),
         Command::DeploySim(a) => deploy::run(a),
+        Command::Sim2sim(a) => sim2sim::run(a),
         Command::Terrain(which) => terrain::run(which),
         Command::Data(which) => data::run(which),
     }

@@ -10,6 +10,8 @@
 //! from `eval.lin_vel_x`, no sideways speed, heading held along the lane.
 use serde::Serialize;
 
+pub mod sim2sim;
+
 use crate::env::config::{CollisionMode, EnvConfig, Integrator, TerrainMode};
 use crate::rl::config::ExperimentConfig;
 use std::sync::Arc;
@@ -132,23 +134,38 @@ pub fn evaluate(ck: &Checkpoint, o: &EvalOptions) -> Result<EvalReport, RlError>
     }
     let cfg = ck.config()?;
     let env_cfg = eval_env_config(&cfg, o);
+    evaluate_in(ck, &cfg, &env_cfg, o)
+}
+
+/// [`evaluate`] in a given env (the checkpoint's `cfg` turned into an eval env
+/// by [`eval_env_config`], then changed: the sim-to-sim matrix's cells).
+pub fn evaluate_in(
+    ck: &Checkpoint,
+    cfg: &ExperimentConfig,
+    env_cfg: &EnvConfig,
+    o: &EvalOptions,
+) -> Result<EvalReport, RlError> {
+    if o.episodes == 0 {
+        return Err(RlError::Invalid("--episodes must be at least 1".into()));
+    }
+    env_cfg.validate()?;
     let length = cfg.eval.lane_length;
     let level = o.level.unwrap_or(cfg.eval.level);
     let mut t = Tally::default();
     if o.terrain == TerrainKind::Flat {
-        let mut env = VecEnv::new(&env_cfg)?;
-        run_episodes(ck, &cfg, &mut env, o.episodes, length, &mut t)?;
+        let mut env = VecEnv::new(env_cfg)?;
+        run_episodes(ck, cfg, &mut env, o.episodes, length, &mut t)?;
     } else {
         let lanes = cfg.eval.lanes.clamp(1, o.episodes);
         for k in 0..lanes {
             let count = o.episodes / lanes + usize::from(k < o.episodes % lanes);
-            let lane = eval_lane(&cfg, o.terrain, level, o.seed.wrapping_add(k as u64))?;
+            let lane = eval_lane(cfg, o.terrain, level, o.seed.wrapping_add(k as u64))?;
             let mut lane_cfg = env_cfg.clone();
             lane_cfg.n_envs = env_cfg.n_envs.min(count as i64);
             lane_cfg.seed = o.seed.wrapping_add(1000 * k as u64);
             let scene = Scene::with_terrain(&lane_cfg, Some(Arc::new(lane.map().clone())))?;
             let mut env = VecEnv::with_scene(&lane_cfg, scene)?;
-            run_episodes(ck, &cfg, &mut env, count, length, &mut t)?;
+            run_episodes(ck, cfg, &mut env, count, length, &mut t)?;
         }
     }
     let d = t.done as f64;

@@ -125,12 +125,28 @@ impl Checkpoint {
     }
 
     /// The resolved config stored in the checkpoint.
+    ///
+    /// On a MuJoCo 2.x build a stored `implicitfast` integrator (MuJoCo 3 only)
+    /// is read as `implicit`, with a note on stderr: evaluation runs on the
+    /// default scene's `implicit` anyway, and this is what lets the sim-to-sim
+    /// matrix's MuJoCo-build axis load 3.x-trained checkpoints.
     pub fn config(&self) -> Result<crate::rl::config::ExperimentConfig, RlError> {
-        Ok(crate::rl::config::from_str(
-            &self.meta.config,
-            &format!("{} (stored config)", self.path.display()),
-            &[],
-        )?)
+        let label = format!("{} (stored config)", self.path.display());
+        let stored_fast = self.meta.config.contains("implicitfast");
+        if stored_fast && mujoco_sys::MUJOCO_VERSION_HEADER < 300 {
+            eprintln!(
+                "note: {} was trained with the implicitfast integrator, which MuJoCo {} lacks; \
+                 its training scene runs with implicit here",
+                self.path.display(),
+                crate::sim::mujoco_version()
+            );
+            return Ok(crate::rl::config::from_str(
+                &self.meta.config,
+                &label,
+                &["env.sim.integrator=implicit".to_string()],
+            )?);
+        }
+        Ok(crate::rl::config::from_str(&self.meta.config, &label, &[])?)
     }
 
     fn tensor(&self, name: &str) -> Result<&Tensor, RlError> {
