@@ -101,11 +101,25 @@ pub fn run(a: Sim2SimArgs) -> Result<()> {
                 .collect()
         })
         .collect();
+    // short labels: the cell's name before any parenthesis, the build's
+    // version without "MuJoCo"
+    let short_rows: Vec<String> = rows
+        .iter()
+        .map(|r| r.split(" (").next().unwrap_or(r).to_string())
+        .collect();
+    let short_cols: Vec<String> = report
+        .builds
+        .iter()
+        .map(|b| {
+            b.replace("stock Python MuJoCo", "Python")
+                .replace("MuJoCo ", "")
+        })
+        .collect();
     dreampolicy::plot::heatmap(
         &out.join("sim2sim.png"),
         &format!("sim-to-sim success rate: {}", ck_name(&a.checkpoint)),
-        &rows,
-        &report.builds,
+        &short_rows,
+        &short_cols,
         &values,
     )?;
     if a.json {
