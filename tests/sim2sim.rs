@@ -50,8 +50,10 @@ fn the_walker_loads_and_walks_the_reference_cell_on_this_build() {
         ),
     ]);
     let mut seen = Vec::new();
-    let rs =
-        sim2sim::run_cells(&ck, &c, 1, |i, n, name| seen.push((i, n, name.to_string()))).unwrap();
+    let rs = sim2sim::run_cells(&ck, &cfg, &c, 1, |i, n, name| {
+        seen.push((i, n, name.to_string()))
+    })
+    .unwrap();
     assert_eq!(seen.len(), 3);
     assert_eq!(rs.len(), 3);
     assert_eq!(rs[0].success_rate, Some(1.0), "{:?}", rs[0]);

@@ -87,7 +87,7 @@ impl EvalArgs {
 
 /// A checkpoint's short name: the run directory of `<run>/checkpoints/<file>.pt`,
 /// else the file stem.
-fn checkpoint_name(path: &Path) -> String {
+pub(super) fn checkpoint_name(path: &Path) -> String {
     let parent = path.parent();
     if parent
         .and_then(|p| p.file_name())

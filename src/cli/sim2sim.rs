@@ -10,6 +10,7 @@ use anyhow::{bail, Context, Result};
 
 use dreampolicy::eval::sim2sim::{self, CellResult, Sim2SimConfig, Sim2SimReport};
 use dreampolicy::rl::checkpoint::Checkpoint;
+use dreampolicy::rl::config::ExperimentConfig;
 use dreampolicy::terrain::TerrainKind;
 
 /// Arguments of `sim2sim`.
@@ -40,8 +41,9 @@ pub struct Sim2SimArgs {
 pub fn run(a: Sim2SimArgs) -> Result<()> {
     let c = sim2sim::load(&a.config)?;
     let ck = Checkpoint::read(&a.checkpoint)?;
+    let cfg = ck.config()?;
     let quiet = a.this_build_only || a.json;
-    let cells = sim2sim::run_cells(&ck, &c, a.threads.max(1), |i, n, name| {
+    let cells = sim2sim::run_cells(&ck, &cfg, &c, a.threads.max(1), |i, n, name| {
         if !quiet {
             eprintln!("[{}/{n}] {} {name}", i + 1, sim2sim::this_build());
         }
@@ -50,6 +52,7 @@ pub fn run(a: Sim2SimArgs) -> Result<()> {
         println!("{}", serde_json::to_string(&cells)?);
         return Ok(());
     }
+    let out = out_dir(&a);
     let mut builds = vec![sim2sim::this_build()];
     let mut all = cells;
     if !a.no_external {
@@ -59,8 +62,7 @@ pub fn run(a: Sim2SimArgs) -> Result<()> {
             all.append(&mut rs);
         }
         if let Some(sd) = &c.stock_deployer {
-            let out = out_dir(&a);
-            let (name, r) = stock_deployer(&ck, &c, sd, &out)?;
+            let (name, r) = stock_deployer(&ck, &cfg, &c, sd, &out)?;
             builds.push(name);
             all.push(r);
         }
@@ -69,15 +71,11 @@ pub fn run(a: Sim2SimArgs) -> Result<()> {
         checkpoint: a.checkpoint.display().to_string(),
         config: a.config.display().to_string(),
         terrain: c.terrain.clone(),
-        level: (c.kind() != TerrainKind::Flat).then(|| {
-            c.level
-                .unwrap_or_else(|| ck.config().map(|k| k.eval.level).unwrap_or(0))
-        }),
+        level: (c.kind() != TerrainKind::Flat).then(|| c.level.unwrap_or(cfg.eval.level)),
         episodes: c.episodes,
         builds,
         cells: all,
     };
-    let out = out_dir(&a);
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let md = report.markdown();
     std::fs::write(
@@ -117,7 +115,10 @@ pub fn run(a: Sim2SimArgs) -> Result<()> {
         .collect();
     dreampolicy::plot::heatmap(
         &out.join("sim2sim.png"),
-        &format!("sim-to-sim success rate: {}", ck_name(&a.checkpoint)),
+        &format!(
+            "sim-to-sim success rate: {}",
+            super::eval::checkpoint_name(&a.checkpoint)
+        ),
         &short_rows,
         &short_cols,
         &values,
@@ -131,21 +132,13 @@ pub fn run(a: Sim2SimArgs) -> Result<()> {
     Ok(())
 }
 
-fn ck_name(p: &Path) -> String {
-    let run = p
-        .parent()
-        .filter(|d| d.ends_with("checkpoints"))
-        .and_then(|d| d.parent());
-    run.unwrap_or(p)
-        .file_name()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_default()
-}
-
 fn out_dir(a: &Sim2SimArgs) -> PathBuf {
     a.out.clone().unwrap_or_else(|| {
         let cfg = a.config.file_stem().unwrap_or_default().to_string_lossy();
-        PathBuf::from(format!("runs/sim2sim/{}_{cfg}", ck_name(&a.checkpoint)))
+        PathBuf::from(format!(
+            "runs/sim2sim/{}_{cfg}",
+            super::eval::checkpoint_name(&a.checkpoint)
+        ))
     })
 }
 
@@ -206,6 +199,7 @@ fn other_build(
 /// (noise seed = episode), for the eval's time limit.
 fn stock_deployer(
     ck: &Checkpoint,
+    cfg: &ExperimentConfig,
     c: &Sim2SimConfig,
     sd: &sim2sim::StockDeployer,
     out: &Path,
@@ -228,7 +222,6 @@ fn stock_deployer(
     }
     let bundle = out.join("bundle");
     dreampolicy::deploy::write_bundle(ck, &bundle).context("exporting the bundle")?;
-    let cfg = ck.config()?;
     let (lo, hi) = (cfg.eval.lin_vel_x[0], cfg.eval.lin_vel_x[1]);
     let length = cfg.eval.lane_length;
     let n = sd.episodes.max(1);

@@ -34,11 +34,19 @@ pub fn parse<T: serde::de::DeserializeOwned>(
     label: &str,
     overrides: &[String],
 ) -> Result<T, ConfigError> {
-    let mut value: serde_yaml::Value =
-        serde_yaml::from_str(text).map_err(|e| ConfigError::Parse {
-            path: label.to_string(),
-            message: e.to_string(),
-        })?;
+    let value: serde_yaml::Value = serde_yaml::from_str(text).map_err(|e| ConfigError::Parse {
+        path: label.to_string(),
+        message: e.to_string(),
+    })?;
+    parse_value(value, label, overrides)
+}
+
+/// [`parse`] from a YAML value (e.g. a config already in memory, serialized).
+pub fn parse_value<T: serde::de::DeserializeOwned>(
+    mut value: serde_yaml::Value,
+    label: &str,
+    overrides: &[String],
+) -> Result<T, ConfigError> {
     for arg in overrides {
         apply_override(&mut value, arg)?;
     }

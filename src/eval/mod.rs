@@ -129,9 +129,6 @@ pub fn eval_env_config(cfg: &ExperimentConfig, o: &EvalOptions) -> EnvConfig {
 /// `eval.terrain` (the paper's table unless the config says otherwise) at `eval.level`, `eval.lanes` different lanes
 /// (seeds `o.seed`, `o.seed + 1`, ...) sharing the episodes evenly.
 pub fn evaluate(ck: &Checkpoint, o: &EvalOptions) -> Result<EvalReport, RlError> {
-    if o.episodes == 0 {
-        return Err(RlError::Invalid("--episodes must be at least 1".into()));
-    }
     let cfg = ck.config()?;
     let env_cfg = eval_env_config(&cfg, o);
     evaluate_in(ck, &cfg, &env_cfg, o)

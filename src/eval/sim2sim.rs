@@ -10,9 +10,10 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use super::{eval_env_config, evaluate_in, EvalOptions, EvalReport};
-use crate::config::{apply_override, ConfigError};
+use crate::config::{parse_value, ConfigError};
 use crate::env::config::EnvConfig;
 use crate::rl::checkpoint::Checkpoint;
+use crate::rl::config::ExperimentConfig;
 use crate::rl::RlError;
 use crate::terrain::TerrainKind;
 
@@ -129,19 +130,15 @@ impl Sim2SimConfig {
 /// The evaluation env of `cell`: `base` with the cell's overrides applied
 /// (through YAML, so any env key can be set) and checked.
 pub fn cell_env(base: &EnvConfig, cell: &Cell) -> Result<EnvConfig, ConfigError> {
-    let mut v = serde_yaml::to_value(base).map_err(|e| ConfigError::Invalid(e.to_string()))?;
-    for s in &cell.set {
-        apply_override(&mut v, s)
-            .map_err(|e| ConfigError::Invalid(format!("sim2sim cell {:?}: {s}: {e}", cell.name)))?;
-    }
-    let env: EnvConfig = serde_yaml::from_value(v)
-        .map_err(|e| ConfigError::Invalid(format!("sim2sim cell {:?}: {e}", cell.name)))?;
-    env.validate()
-        .map_err(|e| ConfigError::Invalid(format!("sim2sim cell {:?}: {e}", cell.name)))?;
+    let in_cell =
+        |e: ConfigError| ConfigError::Invalid(format!("sim2sim cell {:?}: {e}", cell.name));
+    let v = serde_yaml::to_value(base).map_err(|e| ConfigError::Invalid(e.to_string()))?;
+    let env: EnvConfig = parse_value(v, "env", &cell.set).map_err(in_cell)?;
+    env.validate().map_err(in_cell)?;
     Ok(env)
 }
 
-/// One cell's result in one build (`report` None: not run, `note` says why).
+/// One cell's result in one build (the figures None: not run, `note` says why).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct CellResult {
     pub cell: String,
@@ -201,14 +198,15 @@ pub struct Sim2SimReport {
     pub cells: Vec<CellResult>,
 }
 
-/// Run every cell in this build, calling `progress(done, total, cell)` before each.
+/// Run every cell in this build (`cfg`: the checkpoint's config), calling
+/// `progress(done, total, cell)` before each.
 pub fn run_cells(
     ck: &Checkpoint,
+    cfg: &ExperimentConfig,
     c: &Sim2SimConfig,
     threads: usize,
     mut progress: impl FnMut(usize, usize, &str),
 ) -> Result<Vec<CellResult>, RlError> {
-    let cfg = ck.config()?;
     let o = EvalOptions {
         terrain: c.kind(),
         episodes: c.episodes,
@@ -217,7 +215,7 @@ pub fn run_cells(
         threads,
         level: c.level,
     };
-    let base = eval_env_config(&cfg, &o);
+    let base = eval_env_config(cfg, &o);
     let build = this_build();
     let mut out = Vec::with_capacity(c.cells.len());
     for (i, cell) in c.cells.iter().enumerate() {
@@ -226,7 +224,7 @@ pub fn run_cells(
         // note in its cell, not the end of the matrix
         match cell_env(&base, cell) {
             Ok(env) => {
-                let r = evaluate_in(ck, &cfg, &env, &o)?;
+                let r = evaluate_in(ck, cfg, &env, &o)?;
                 out.push(CellResult::from_report(cell, &build, &r));
             }
             Err(e) => out.push(CellResult::missing(

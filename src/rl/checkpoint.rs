@@ -132,21 +132,21 @@ impl Checkpoint {
     /// matrix's MuJoCo-build axis load 3.x-trained checkpoints.
     pub fn config(&self) -> Result<crate::rl::config::ExperimentConfig, RlError> {
         let label = format!("{} (stored config)", self.path.display());
-        let stored_fast = self.meta.config.contains("implicitfast");
-        if stored_fast && mujoco_sys::MUJOCO_VERSION_HEADER < 300 {
+        let mut overrides = Vec::new();
+        if self.meta.config.contains("implicitfast") && mujoco_sys::MUJOCO_VERSION_HEADER < 300 {
             eprintln!(
                 "note: {} was trained with the implicitfast integrator, which MuJoCo {} lacks; \
                  its training scene runs with implicit here",
                 self.path.display(),
                 crate::sim::mujoco_version()
             );
-            return Ok(crate::rl::config::from_str(
-                &self.meta.config,
-                &label,
-                &["env.sim.integrator=implicit".to_string()],
-            )?);
+            overrides.push("env.sim.integrator=implicit".to_string());
         }
-        Ok(crate::rl::config::from_str(&self.meta.config, &label, &[])?)
+        Ok(crate::rl::config::from_str(
+            &self.meta.config,
+            &label,
+            &overrides,
+        )?)
     }
 
     fn tensor(&self, name: &str) -> Result<&Tensor, RlError> {

@@ -27,8 +27,6 @@ pub struct Losses {
     pub learning_rate: f64,
     pub grad_norm: f64,
     pub mean_std: f64,
-    /// Mean mirror loss (0 without `ppo.mirror_loss_coef`).
-    pub mirror: f64,
 }
 
 /// PPO: its hyperparameters and optimizer.
@@ -198,7 +196,8 @@ impl Ppo {
                     &surrogate + &value_loss * c.value_loss_coef - &entropy * c.entropy_coef;
                 // rsl_rl's mirror loss: each sample's mean against the mirror of
                 // its partner's (the same state mirrored), detached
-                if let (Some([_, _, _, mact]), true) = (&self.mirror, c.mirror_loss_coef > 0.0) {
+                let mirror_for_loss = self.mirror.as_ref().filter(|_| c.mirror_loss_coef > 0.0);
+                if let Some([.., mact]) = mirror_for_loss {
                     let partner = (&idx + b_orig).remainder(b);
                     let target = tch::no_grad(|| {
                         let pick_p = |t: &Tensor| t.index_select(0, &partner);
@@ -207,7 +206,6 @@ impl Ppo {
                         m.index_select(1, &mact.0) * &mact.1
                     });
                     let mirror_loss = (&mean - target).square().mean(Kind::Float);
-                    l.mirror += mirror_loss.double_value(&[]);
                     loss += mirror_loss * c.mirror_loss_coef;
                 }
                 self.opt.zero_grad();
@@ -238,7 +236,6 @@ impl Ppo {
             &mut l.kl,
             &mut l.clip_fraction,
             &mut l.grad_norm,
-            &mut l.mirror,
         ] {
             *v /= count;
         }
