@@ -17,7 +17,7 @@ LAYERS = [
     ["env"],
     ["data", "rl"],
     ["world_model"],
-    ["eval", "collect", "play", "deploy", "bench"],
+    ["eval", "collect", "play", "deploy", "bench", "sweep"],
     ["cli", "main"],
 ]
 LEVEL = {m: i for i, layer in enumerate(LAYERS) for m in layer}

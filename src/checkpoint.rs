@@ -4,6 +4,14 @@
 //! target, so a kill at any moment leaves the previous checkpoint loadable;
 //! [`NamedTensors::read`] turns a missing, truncated or foreign file into one
 //! [`CheckpointFileError`] naming it.
+//!
+//! Every file is sealed: the archive's zip comment (the last bytes of the file,
+//! which libtorch and Python's `torch.load` ignore) holds
+//! `dreampolicy-sha256:<hex>`, the SHA-256 of the file as libtorch wrote it
+//! (with an empty comment). [`verify`] recomputes it before every load, so a
+//! flipped byte anywhere, in a tensor, the JSON record or the zip structure, is
+//! refused instead of loading altered weights; a file without a seal is refused
+//! too ([`seal_file`] is the explicit way to trust one, `dreampolicy checkpoint seal`).
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
@@ -24,6 +32,153 @@ pub enum CheckpointFileError {
     Torch(#[from] tch::TchError),
     #[error("checkpoint {path}: {message}", path = .path.display())]
     Invalid { path: PathBuf, message: String },
+}
+
+/// The seal's prefix in the zip comment.
+const SEAL_TAG: &[u8] = b"dreampolicy-sha256:";
+/// Tag + 64 hex digits.
+const SEAL_LEN: usize = SEAL_TAG.len() + 64;
+/// The zip end-of-central-directory record: signature, and its size without comment.
+const EOCD_SIG: &[u8] = b"PK\x05\x06";
+const EOCD_LEN: usize = 22;
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// What is wrong with a file's seal.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum SealError {
+    /// No seal: written before checkpoints were sealed, or not by dreampolicy.
+    Missing,
+    /// The digest does not match the bytes: the file changed after it was written.
+    Mismatch,
+    /// Not a zip archive as libtorch writes one (no end record at its end).
+    NotAnArchive,
+    /// Sealing a file that already carries a seal.
+    AlreadySealed,
+}
+
+impl std::fmt::Display for SealError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            SealError::Missing => {
+                "has no integrity seal (written before checkpoints were sealed, or not by \
+                 dreampolicy); if you trust it, seal it with `dreampolicy checkpoint seal FILE`"
+            }
+            SealError::Mismatch => {
+                "is corrupt: its SHA-256 does not match the seal written with it (the file \
+                 changed after it was saved: a damaged copy or disk); restore it from its source"
+            }
+            SealError::NotAnArchive => {
+                "is damaged or not a checkpoint: it does not end as a sealed libtorch archive \
+                 does (cut short, or another kind of file)"
+            }
+            SealError::AlreadySealed => "is already sealed",
+        })
+    }
+}
+
+/// Check a sealed file's bytes: the digest in its zip comment against the
+/// SHA-256 of the file without it.
+pub fn verify(bytes: &[u8]) -> Result<(), SealError> {
+    use sha2::{Digest, Sha256};
+    let n = bytes.len();
+    if n < EOCD_LEN + SEAL_LEN || &bytes[n - SEAL_LEN..n - 64] != SEAL_TAG {
+        let unsealed_archive = n >= EOCD_LEN
+            && &bytes[n - EOCD_LEN..n - EOCD_LEN + 4] == EOCD_SIG
+            && bytes[n - 2..] == [0, 0];
+        let damaged_seal = bytes
+            .windows(SEAL_TAG.len())
+            .rev()
+            .take(2 * SEAL_LEN)
+            .any(|w| w == SEAL_TAG);
+        return Err(if unsealed_archive {
+            SealError::Missing
+        } else if damaged_seal {
+            SealError::Mismatch
+        } else {
+            SealError::NotAnArchive
+        });
+    }
+    let eocd = n - SEAL_LEN - EOCD_LEN;
+    let comment_len = u16::from_le_bytes([bytes[n - SEAL_LEN - 2], bytes[n - SEAL_LEN - 1]]);
+    if &bytes[eocd..eocd + 4] != EOCD_SIG || comment_len as usize != SEAL_LEN {
+        return Err(SealError::Mismatch);
+    }
+    let mut h = Sha256::new();
+    h.update(&bytes[..n - SEAL_LEN - 2]);
+    h.update([0u8, 0u8]);
+    if hex(&h.finalize()) == String::from_utf8_lossy(&bytes[n - 64..]) {
+        Ok(())
+    } else {
+        Err(SealError::Mismatch)
+    }
+}
+
+/// The sealed form of an unsealed archive's bytes.
+pub fn seal_bytes(mut bytes: Vec<u8>) -> Result<Vec<u8>, SealError> {
+    use sha2::{Digest, Sha256};
+    let n = bytes.len();
+    if verify(&bytes).is_ok() {
+        return Err(SealError::AlreadySealed);
+    }
+    if n < EOCD_LEN
+        || &bytes[n - EOCD_LEN..n - EOCD_LEN + 4] != EOCD_SIG
+        || bytes[n - 2..] != [0, 0]
+    {
+        return Err(SealError::NotAnArchive);
+    }
+    let digest = hex(&Sha256::digest(&bytes));
+    bytes[n - 2..].copy_from_slice(&(SEAL_LEN as u16).to_le_bytes());
+    bytes.extend_from_slice(SEAL_TAG);
+    bytes.extend_from_slice(digest.as_bytes());
+    Ok(bytes)
+}
+
+/// Seal the archive at `path` in place (through a temporary file and a rename).
+/// For a file written before checkpoints were sealed that you trust: a sealed
+/// file is refused, and nothing checks that the weights are the ones you meant.
+pub fn seal_file(path: &Path) -> Result<(), CheckpointFileError> {
+    let bytes = std::fs::read(path).map_err(|source| CheckpointFileError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let sealed = seal_bytes(bytes).map_err(|e| invalid(path, e.to_string()))?;
+    let tmp = path.with_extension("pt.tmp");
+    write_synced(&tmp, &sealed)?;
+    std::fs::rename(&tmp, path).map_err(|source| CheckpointFileError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Check the seal of the file at `path`.
+pub fn verify_file(path: &Path) -> Result<(), CheckpointFileError> {
+    if !path.is_file() {
+        return Err(invalid(path, "no such file"));
+    }
+    let bytes = std::fs::read(path).map_err(|source| CheckpointFileError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    verify(&bytes).map_err(|e| invalid(path, e.to_string()))
+}
+
+fn write_synced(path: &Path, bytes: &[u8]) -> Result<(), CheckpointFileError> {
+    use std::io::Write;
+    let io = |source| CheckpointFileError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut f = std::fs::File::create(path).map_err(io)?;
+    f.write_all(bytes).map_err(io)?;
+    f.sync_all().map_err(io)
+}
+
+/// The first line of a libtorch message: its C++ backtrace stays out of ours.
+pub fn first_line(text: &str) -> &str {
+    text.lines().next().unwrap_or("").trim_end()
 }
 
 fn invalid(path: &Path, message: impl Into<String>) -> CheckpointFileError {
@@ -49,14 +204,12 @@ pub fn save_named(
         })?;
     }
     let tmp = path.with_extension("pt.tmp");
-    Tensor::save_multi(&named, &tmp)?;
+    let mut bytes = Vec::new();
+    Tensor::save_multi_to_stream(&named, &mut bytes)
+        .map_err(|e| invalid(path, format!("saving: {}", first_line(&e.to_string()))))?;
+    let sealed = seal_bytes(bytes).map_err(|e| invalid(path, format!("sealing: {e}")))?;
     // flush the data before the rename makes it the checkpoint
-    std::fs::File::open(&tmp)
-        .and_then(|f| f.sync_all())
-        .map_err(|source| CheckpointFileError::Io {
-            path: tmp.clone(),
-            source,
-        })?;
+    write_synced(&tmp, &sealed)?;
     std::fs::rename(&tmp, path).map_err(|source| CheckpointFileError::Io {
         path: path.to_path_buf(),
         source,
@@ -73,11 +226,13 @@ pub struct NamedTensors<M> {
 impl<M: DeserializeOwned> NamedTensors<M> {
     /// Read `path`; a missing, truncated or foreign file is one clear error.
     pub fn read(path: &Path) -> Result<NamedTensors<M>, CheckpointFileError> {
-        if !path.is_file() {
-            return Err(invalid(path, "no such file"));
-        }
-        let list = Tensor::load_multi(path)
-            .map_err(|e| invalid(path, format!("not a readable checkpoint ({e})")))?;
+        verify_file(path)?;
+        let list = Tensor::load_multi(path).map_err(|e| {
+            invalid(
+                path,
+                format!("not a readable checkpoint ({})", first_line(&e.to_string())),
+            )
+        })?;
         let tensors: HashMap<String, Tensor> = list.into_iter().collect();
         let meta_t = tensors
             .get("meta")

@@ -17,6 +17,7 @@
 //! * [`plot`] PNG training curves (a grid of line-chart panels) from a metrics CSV
 //! * [`collect`] the expert dataset's collection: specialists rolled out into MCAP shards
 //! * [`bench`] the `dreampolicy bench ...` measurements
+//! * [`sweep`] config-driven sweeps: sweep files, their runs, the task body, Slurm arrays, collection
 pub mod bench;
 pub mod checkpoint;
 pub mod collect;
@@ -31,5 +32,6 @@ pub mod rl;
 pub mod robot;
 pub mod run;
 pub mod sim;
+pub mod sweep;
 pub mod terrain;
 pub mod world_model;

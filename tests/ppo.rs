@@ -177,7 +177,7 @@ fn broken_checkpoints_are_clear_errors() {
     let junk = dir.write("junk.pt", "not a checkpoint");
     let e = Checkpoint::read(&junk).err().unwrap().to_string();
     assert!(
-        e.contains("junk.pt") && e.contains("not a readable checkpoint"),
+        e.contains("junk.pt") && e.contains("not a checkpoint") && !e.contains('\n'),
         "{e}"
     );
     // a checkpoint cut in half

@@ -5,6 +5,7 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 
 mod bench;
+mod checkpoint;
 mod collect;
 mod data;
 mod deploy;
@@ -16,6 +17,7 @@ mod play;
 mod plot;
 mod rollout;
 mod sim2sim;
+mod sweep;
 mod terrain;
 mod train;
 
@@ -70,6 +72,15 @@ enum Command {
     /// latency, noise, other MuJoCo builds and the stock Python deployer;
     /// writes JSON, a Markdown table and a heatmap PNG
     Sim2sim(sim2sim::Sim2SimArgs),
+    /// Config-driven sweeps: axes over any config key, seeds, resources; run
+    /// here (`sweep run --jobs N`, resumable), as a Slurm array (`sweep
+    /// slurm`), and gathered into a CSV and a plot (`sweep collect`).
+    #[command(subcommand)]
+    Sweep(sweep::SweepCommand),
+    /// Checkpoint files' integrity seals: verify them, or seal files written
+    /// before checkpoints were sealed.
+    #[command(subcommand)]
+    Checkpoint(checkpoint::CheckpointCommand),
     /// Procedural terrains.
     #[command(subcommand)]
     Terrain(terrain::TerrainCommand),
@@ -96,6 +107,8 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Export(a) => export::run(a),
         Command::DeploySim(a) => deploy::run(a),
         Command::Sim2sim(a) => sim2sim::run(a),
+        Command::Sweep(which) => sweep::run(which),
+        Command::Checkpoint(which) => checkpoint::run(which),
         Command::Terrain(which) => terrain::run(which),
         Command::Data(which) => data::run(which),
     }
