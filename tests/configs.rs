@@ -52,6 +52,15 @@ fn every_shipped_config_loads() {
             }
             continue;
         }
+        // configs/sweeps/ holds sweep files: every run's config loads
+        if f.parent().is_some_and(|d| d.ends_with("sweeps")) {
+            let s = dreampolicy::sweep::Sweep::load(f)
+                .unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+            s.validate_runs()
+                .unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+            assert!(!s.runs().is_empty(), "{}", f.display());
+            continue;
+        }
         dreampolicy::rl::config::load(f, &[]).unwrap_or_else(|e| panic!("{}: {e}", f.display()));
     }
     // and a typo in a training section is refused with the key named
