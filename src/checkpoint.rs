@@ -1,7 +1,7 @@
 //! Checkpoint files shared by every trainer: one libtorch archive of named
 //! tensors plus a `meta` entry holding a JSON record (the trainer's own type).
 //! [`save_named`] writes to `<name>.pt.tmp`, fsyncs it and renames it over the
-//! target, so a kill at any moment leaves the previous checkpoint loadable;
+//! target ([`crate::run::write_atomic`]), so a kill at any moment leaves the previous checkpoint loadable;
 //! [`NamedTensors::read`] turns a missing, truncated or foreign file into one
 //! [`CheckpointFileError`] naming it.
 //!
@@ -79,21 +79,25 @@ impl std::fmt::Display for SealError {
     }
 }
 
+/// True for a zip archive as libtorch writes one: its end record last, with an
+/// empty comment.
+fn is_unsealed_archive(bytes: &[u8]) -> bool {
+    let n = bytes.len();
+    n >= EOCD_LEN && &bytes[n - EOCD_LEN..n - EOCD_LEN + 4] == EOCD_SIG && bytes[n - 2..] == [0, 0]
+}
+
 /// Check a sealed file's bytes: the digest in its zip comment against the
 /// SHA-256 of the file without it.
 pub fn verify(bytes: &[u8]) -> Result<(), SealError> {
     use sha2::{Digest, Sha256};
     let n = bytes.len();
     if n < EOCD_LEN + SEAL_LEN || &bytes[n - SEAL_LEN..n - 64] != SEAL_TAG {
-        let unsealed_archive = n >= EOCD_LEN
-            && &bytes[n - EOCD_LEN..n - EOCD_LEN + 4] == EOCD_SIG
-            && bytes[n - 2..] == [0, 0];
         let damaged_seal = bytes
             .windows(SEAL_TAG.len())
             .rev()
             .take(2 * SEAL_LEN)
             .any(|w| w == SEAL_TAG);
-        return Err(if unsealed_archive {
+        return Err(if is_unsealed_archive(bytes) {
             SealError::Missing
         } else if damaged_seal {
             SealError::Mismatch
@@ -123,10 +127,7 @@ pub fn seal_bytes(mut bytes: Vec<u8>) -> Result<Vec<u8>, SealError> {
     if verify(&bytes).is_ok() {
         return Err(SealError::AlreadySealed);
     }
-    if n < EOCD_LEN
-        || &bytes[n - EOCD_LEN..n - EOCD_LEN + 4] != EOCD_SIG
-        || bytes[n - 2..] != [0, 0]
-    {
+    if !is_unsealed_archive(&bytes) {
         return Err(SealError::NotAnArchive);
     }
     let digest = hex(&Sha256::digest(&bytes));
@@ -140,40 +141,36 @@ pub fn seal_bytes(mut bytes: Vec<u8>) -> Result<Vec<u8>, SealError> {
 /// For a file written before checkpoints were sealed that you trust: a sealed
 /// file is refused, and nothing checks that the weights are the ones you meant.
 pub fn seal_file(path: &Path) -> Result<(), CheckpointFileError> {
-    let bytes = std::fs::read(path).map_err(|source| CheckpointFileError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes = read_bytes(path)?;
     let sealed = seal_bytes(bytes).map_err(|e| invalid(path, e.to_string()))?;
-    let tmp = path.with_extension("pt.tmp");
-    write_synced(&tmp, &sealed)?;
-    std::fs::rename(&tmp, path).map_err(|source| CheckpointFileError::Io {
+    write_atomic(path, &sealed)
+}
+
+/// Check the seal of the file at `path`.
+pub fn verify_file(path: &Path) -> Result<(), CheckpointFileError> {
+    read_verified(path).map(|_| ())
+}
+
+/// The bytes of the file at `path`, once its seal is checked.
+fn read_verified(path: &Path) -> Result<Vec<u8>, CheckpointFileError> {
+    let bytes = read_bytes(path)?;
+    verify(&bytes).map_err(|e| invalid(path, e.to_string()))?;
+    Ok(bytes)
+}
+
+fn read_bytes(path: &Path) -> Result<Vec<u8>, CheckpointFileError> {
+    if !path.is_file() {
+        return Err(invalid(path, "no such file"));
+    }
+    std::fs::read(path).map_err(|source| CheckpointFileError::Io {
         path: path.to_path_buf(),
         source,
     })
 }
 
-/// Check the seal of the file at `path`.
-pub fn verify_file(path: &Path) -> Result<(), CheckpointFileError> {
-    if !path.is_file() {
-        return Err(invalid(path, "no such file"));
-    }
-    let bytes = std::fs::read(path).map_err(|source| CheckpointFileError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    verify(&bytes).map_err(|e| invalid(path, e.to_string()))
-}
-
-fn write_synced(path: &Path, bytes: &[u8]) -> Result<(), CheckpointFileError> {
-    use std::io::Write;
-    let io = |source| CheckpointFileError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let mut f = std::fs::File::create(path).map_err(io)?;
-    f.write_all(bytes).map_err(io)?;
-    f.sync_all().map_err(io)
+fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), CheckpointFileError> {
+    crate::run::write_atomic(path, bytes)
+        .map_err(|(path, source)| CheckpointFileError::Io { path, source })
 }
 
 /// The first line of a libtorch message: its C++ backtrace stays out of ours.
@@ -203,17 +200,11 @@ pub fn save_named(
             source,
         })?;
     }
-    let tmp = path.with_extension("pt.tmp");
     let mut bytes = Vec::new();
     Tensor::save_multi_to_stream(&named, &mut bytes)
         .map_err(|e| invalid(path, format!("saving: {}", first_line(&e.to_string()))))?;
     let sealed = seal_bytes(bytes).map_err(|e| invalid(path, format!("sealing: {e}")))?;
-    // flush the data before the rename makes it the checkpoint
-    write_synced(&tmp, &sealed)?;
-    std::fs::rename(&tmp, path).map_err(|source| CheckpointFileError::Io {
-        path: path.to_path_buf(),
-        source,
-    })
+    write_atomic(path, &sealed)
 }
 
 /// The tensors of a checkpoint file, by name, with its JSON record decoded.
@@ -226,8 +217,9 @@ pub struct NamedTensors<M> {
 impl<M: DeserializeOwned> NamedTensors<M> {
     /// Read `path`; a missing, truncated or foreign file is one clear error.
     pub fn read(path: &Path) -> Result<NamedTensors<M>, CheckpointFileError> {
-        verify_file(path)?;
-        let list = Tensor::load_multi(path).map_err(|e| {
+        // one read: the bytes whose seal was checked are the ones loaded
+        let bytes = read_verified(path)?;
+        let list = Tensor::load_multi_from_stream(std::io::Cursor::new(bytes)).map_err(|e| {
             invalid(
                 path,
                 format!("not a readable checkpoint ({})", first_line(&e.to_string())),

@@ -34,6 +34,19 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> RunError + '_ {
     }
 }
 
+/// Write `bytes` to `<path>.tmp`, fsync it and rename it over `path`: a kill at
+/// any moment leaves either the old file or the new one, never half of one.
+/// On failure the error names the file it concerns.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), (PathBuf, std::io::Error)> {
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    let tmp = PathBuf::from(tmp);
+    let written =
+        File::create(&tmp).and_then(|mut f| f.write_all(bytes).and_then(|()| f.sync_all()));
+    written.map_err(|e| (tmp.clone(), e))?;
+    std::fs::rename(&tmp, path).map_err(|e| (path.to_path_buf(), e))
+}
+
 /// The latest resume checkpoint of a run directory: `checkpoints/latest.pt`.
 pub fn latest_checkpoint(run_dir: &Path) -> PathBuf {
     run_dir.join("checkpoints").join("latest.pt")

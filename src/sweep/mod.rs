@@ -65,6 +65,19 @@ pub enum Trainer {
     WorldModel,
 }
 
+impl Trainer {
+    /// The config keys `--threads` sets (as `train` does).
+    fn thread_keys(self) -> &'static [&'static str] {
+        match self {
+            Trainer::Specialist => &["env.threads", "train.torch_threads"],
+            Trainer::WorldModel => &["train.torch_threads"],
+        }
+    }
+}
+
+/// The config file kind's loader (`rl::config::load`, `load_world_model`).
+type Loader<C> = fn(&Path, &[String]) -> Result<C, ConfigError>;
+
 /// How the axes combine.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -449,18 +462,54 @@ impl Sweep {
     /// sweep before any run starts (every config struct denies unknown fields).
     pub fn validate_runs(&self) -> Result<(), SweepError> {
         for r in self.runs() {
-            let res = match self.trainer {
-                Trainer::Specialist => crate::rl::config::load(&self.base, &r.sets).map(|_| ()),
-                Trainer::WorldModel => {
-                    crate::world_model::config::load_world_model(&self.base, &r.sets).map(|_| ())
-                }
-            };
-            res.map_err(|source| SweepError::RunConfig {
-                run: r.name.clone(),
-                source,
-            })?;
+            match self.trainer {
+                Trainer::Specialist => self.run_config(&r, &[], crate::rl::config::load).map(drop),
+                Trainer::WorldModel => self
+                    .run_config(&r, &[], crate::world_model::config::load_world_model)
+                    .map(drop),
+            }?;
         }
         Ok(())
+    }
+
+    /// Run `r`'s config: the base config with the run's overrides, then `extra`
+    /// (a task's threads); an error names the run.
+    fn run_config<C>(
+        &self,
+        r: &RunSpec,
+        extra: &[String],
+        load: Loader<C>,
+    ) -> Result<C, SweepError> {
+        let mut sets = r.sets.clone();
+        sets.extend_from_slice(extra);
+        load(&self.base, &sets).map_err(|source| SweepError::RunConfig {
+            run: r.name.clone(),
+            source,
+        })
+    }
+
+    /// The config run `r` trains with in `run_dir`: the run directory's own
+    /// `config.yaml` when it resumes, else [`Sweep::run_config`]; `threads` sets
+    /// the trainer's thread keys either way.
+    fn task_config<C>(
+        &self,
+        r: &RunSpec,
+        run_dir: &Path,
+        resume: bool,
+        threads: usize,
+        load: Loader<C>,
+    ) -> Result<C, SweepError> {
+        let thread_sets: Vec<String> = self
+            .trainer
+            .thread_keys()
+            .iter()
+            .map(|k| format!("{k}={threads}"))
+            .collect();
+        if resume {
+            Ok(load(&run_dir.join("config.yaml"), &thread_sets)?)
+        } else {
+            self.run_config(r, &thread_sets, load)
+        }
     }
 
     /// The metrics `collect` reports: the sweep's, or the trainer's headline ones.
@@ -552,14 +601,13 @@ impl SweepDir {
             });
         }
         let sweep = Sweep::load(&self.sweep_file())?;
-        Ok((sweep.clone(), sweep.runs()))
+        let runs = sweep.runs();
+        Ok((sweep, runs))
     }
 }
 
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), SweepError> {
-    let tmp = path.with_extension("tmp");
-    std::fs::write(&tmp, bytes).map_err(io(&tmp))?;
-    std::fs::rename(&tmp, path).map_err(io(path))
+    crate::run::write_atomic(path, bytes).map_err(|(path, source)| SweepError::Io { path, source })
 }
 
 /// Where a run stands.
@@ -633,53 +681,25 @@ pub fn run_task(
 ) -> Result<RunResult, SweepError> {
     let run_dir = dir.run_dir(r);
     let result_path = run_dir.join("result.json");
-    if run_state(&run_dir) == RunState::Finished {
+    let state = run_state(&run_dir);
+    if state == RunState::Finished {
         return read_result(&result_path);
     }
-    let resume = run_state(&run_dir) == RunState::Interrupted;
+    let resume = state == RunState::Interrupted;
     let train_err = |message: String| SweepError::Train {
         run: r.name.clone(),
         message,
     };
     let (iterations, samples, wall) = match sweep.trainer {
         Trainer::Specialist => {
-            let thread_sets = [
-                format!("env.threads={threads}"),
-                format!("train.torch_threads={threads}"),
-            ];
-            let cfg = if resume {
-                crate::rl::config::load(&run_dir.join("config.yaml"), &thread_sets)?
-            } else {
-                let mut sets = r.sets.clone();
-                sets.extend(thread_sets);
-                crate::rl::config::load(&sweep.base, &sets).map_err(|source| {
-                    SweepError::RunConfig {
-                        run: r.name.clone(),
-                        source,
-                    }
-                })?
-            };
+            let cfg = sweep.task_config(r, &run_dir, resume, threads, crate::rl::config::load)?;
             let s = crate::rl::runner::train(&cfg, &run_dir, resume, quiet)
                 .map_err(|e| train_err(e.to_string()))?;
             (s.iterations, s.env_steps, s.wall_time_s)
         }
         Trainer::WorldModel => {
-            let thread_sets = [format!("train.torch_threads={threads}")];
-            let cfg = if resume {
-                crate::world_model::config::load_world_model(
-                    &run_dir.join("config.yaml"),
-                    &thread_sets,
-                )?
-            } else {
-                let mut sets = r.sets.clone();
-                sets.extend(thread_sets);
-                crate::world_model::config::load_world_model(&sweep.base, &sets).map_err(
-                    |source| SweepError::RunConfig {
-                        run: r.name.clone(),
-                        source,
-                    },
-                )?
-            };
+            let load = crate::world_model::config::load_world_model;
+            let cfg = sweep.task_config(r, &run_dir, resume, threads, load)?;
             let s = crate::world_model::train(&cfg, &run_dir, resume, quiet)
                 .map_err(|e| train_err(e.to_string()))?;
             (s.iterations, s.sequences, s.wall_time_s)
