@@ -12,11 +12,17 @@ object: distance, speed, tracking error, final yaw, fall.
         [--scene models/g1/scene_flat.xml] [--seconds 20] [--speed 0.75] \
         [--noise-seed 0]
 
+The bundle's seal is checked first: `deploy.yaml` ends in
+`# dreampolicy-sha256: <hex>` (the SHA-256 of the lines above it) and lists the
+SHA-256 of `policy.pt` and `policy.npz` under `files`; a damaged or edited
+bundle is refused.
+
 Needs mujoco, numpy and pyyaml (scripts/python.lock, installed by setup.sh into
 third_party/pyenv). Runs MLP-history and history-free policies; a GRU history
 encoder is refused with a message (use `dreampolicy deploy-sim`).
 """
 import argparse
+import hashlib
 import json
 import math
 import os
@@ -28,6 +34,29 @@ import yaml
 
 FALL_HEIGHT = 0.45
 FALL_TILT_DEG = 50.0
+
+
+SEAL_PREFIX = "# dreampolicy-sha256: "
+
+
+def check_bundle(bundle_dir, text, b):
+    """Refuse a bundle whose deploy.yaml or policy files changed after export."""
+    path = os.path.join(bundle_dir, "deploy.yaml")
+    body, _, last = text.rstrip("\n").rpartition("\n")
+    body = body + "\n" if body else ""
+    if not last.startswith(SEAL_PREFIX):
+        raise SystemExit(f"{path}: has no integrity seal; write the bundle again with "
+                         "`dreampolicy export`")
+    if hashlib.sha256(body.encode()).hexdigest() != last[len(SEAL_PREFIX):]:
+        raise SystemExit(f"{path}: is corrupt: its SHA-256 does not match its seal line")
+    for name in (b["policy"]["file"], "policy.npz"):
+        digest = (b.get("files") or {}).get(name)
+        if digest is None:
+            raise SystemExit(f"{path}: holds no SHA-256 for {name}")
+        with open(os.path.join(bundle_dir, name), "rb") as f:
+            if hashlib.sha256(f.read()).hexdigest() != digest:
+                raise SystemExit(f"{os.path.join(bundle_dir, name)}: is corrupt: its SHA-256 "
+                                 "does not match the one in deploy.yaml")
 
 
 def act_fn(name):
@@ -104,9 +133,17 @@ def main():
 
     path = os.path.join(a.bundle, "deploy.yaml")
     try:
-        b = yaml.safe_load(open(path))
+        with open(path) as f:
+            text = f.read()
     except OSError as e:
         raise SystemExit(f"{path}: {e.strerror}")
+    try:
+        b = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        raise SystemExit(f"{path}: not YAML ({str(e).splitlines()[0]})")
+    if not isinstance(b, dict):
+        raise SystemExit(f"{path}: not a deploy.yaml mapping")
+    check_bundle(a.bundle, text, b)
     if b.get("format") != "dreampolicy-deploy/1":
         raise SystemExit(f"{path}: format {b.get('format')!r}, this script reads dreampolicy-deploy/1")
     policy = Policy(a.bundle, b["numpy_policy"])

@@ -42,42 +42,8 @@ const SEAL_LEN: usize = SEAL_TAG.len() + 64;
 const EOCD_SIG: &[u8] = b"PK\x05\x06";
 const EOCD_LEN: usize = 22;
 
-fn hex(bytes: &[u8]) -> String {
-    bytes.iter().map(|b| format!("{b:02x}")).collect()
-}
-
-/// What is wrong with a file's seal.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum SealError {
-    /// No seal: written before checkpoints were sealed, or not by dreampolicy.
-    Missing,
-    /// The digest does not match the bytes: the file changed after it was written.
-    Mismatch,
-    /// Not a zip archive as libtorch writes one (no end record at its end).
-    NotAnArchive,
-    /// Sealing a file that already carries a seal.
-    AlreadySealed,
-}
-
-impl std::fmt::Display for SealError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            SealError::Missing => {
-                "has no integrity seal (written before checkpoints were sealed, or not by \
-                 dreampolicy); if you trust it, seal it with `dreampolicy checkpoint seal FILE`"
-            }
-            SealError::Mismatch => {
-                "is corrupt: its SHA-256 does not match the seal written with it (the file \
-                 changed after it was saved: a damaged copy or disk); restore it from its source"
-            }
-            SealError::NotAnArchive => {
-                "is damaged or not a checkpoint: it does not end as a sealed libtorch archive \
-                 does (cut short, or another kind of file)"
-            }
-            SealError::AlreadySealed => "is already sealed",
-        })
-    }
-}
+use crate::seal::hex;
+pub use crate::seal::SealError;
 
 /// True for a zip archive as libtorch writes one: its end record last, with an
 /// empty comment.

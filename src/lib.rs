@@ -13,6 +13,7 @@
 //! * [`world_model`] the terrain-aware autoregressive diffusion world model: DiT denoiser, DDPM/DDIM, CFG, scheduled-sampling trainer, rollout
 //! * [`data`] the expert dataset: MCAP shards of frames, windows, split, shuffle, stats
 //! * [`checkpoint`] checkpoint files shared by the trainers: named tensors + a JSON record, written atomically
+//! * [`seal`] SHA-256 seals inside the YAML and JSON files a later run trusts (config.yaml, deploy.yaml, stats.json)
 //! * [`run`] run directories (config.yaml, metrics.csv, log.txt) and progress bars
 //! * [`plot`] PNG training curves (a grid of line-chart panels) from a metrics CSV
 //! * [`collect`] the expert dataset's collection: specialists rolled out into MCAP shards
@@ -31,6 +32,7 @@ pub mod plot;
 pub mod rl;
 pub mod robot;
 pub mod run;
+pub mod seal;
 pub mod sim;
 pub mod sweep;
 pub mod terrain;

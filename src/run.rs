@@ -70,7 +70,8 @@ pub struct RunDir {
 }
 
 impl RunDir {
-    /// Create `path` (and parents), write `config.yaml` from `config`, and start
+    /// Create `path` (and parents), write `config.yaml` from `config` (sealed:
+    /// [`crate::seal::seal_yaml`], checked by every config loader), and start
     /// `metrics.csv` with `columns`. An existing `metrics.csv` is replaced.
     pub fn create(
         path: &Path,
@@ -79,9 +80,8 @@ impl RunDir {
     ) -> Result<RunDir, RunError> {
         std::fs::create_dir_all(path).map_err(io(path))?;
         let cfg_path = path.join("config.yaml");
-        let tmp = path.join(".config.yaml.tmp");
-        std::fs::write(&tmp, serde_yaml::to_string(config)?).map_err(io(&tmp))?;
-        std::fs::rename(&tmp, &cfg_path).map_err(io(&cfg_path))?;
+        let text = crate::seal::seal_yaml(&serde_yaml::to_string(config)?);
+        write_atomic(&cfg_path, text.as_bytes()).map_err(|(p, e)| io(&p)(e))?;
         let mpath = path.join("metrics.csv");
         let mut metrics = BufWriter::new(File::create(&mpath).map_err(io(&mpath))?);
         writeln!(metrics, "{}", columns.join(",")).map_err(io(&mpath))?;

@@ -188,7 +188,7 @@ fn broken_bundles_are_one_line_errors() {
     std::fs::create_dir_all(&other).unwrap();
     std::fs::write(
         other.join("deploy.yaml"),
-        text.replace("dreampolicy-deploy/1", "dreampolicy-deploy/9"),
+        dreampolicy::seal::seal_yaml(&text.replace("dreampolicy-deploy/1", "dreampolicy-deploy/9")),
     )
     .unwrap();
     let e = err(&other);
@@ -200,7 +200,7 @@ fn broken_bundles_are_one_line_errors() {
     let policy = std::fs::read(bundle_dir.join("policy.pt")).unwrap();
     std::fs::write(cut.join("policy.pt"), &policy[..policy.len() / 3]).unwrap();
     let e = err(&cut);
-    assert!(e.contains("policy.pt") && e.contains("TorchScript"), "{e}");
+    assert!(e.contains("policy.pt") && e.contains("corrupt"), "{e}");
     assert_eq!(e.lines().count(), 1, "{e}");
     // the CLI says so in one line and exits 1
     let out = Command::new(env!("CARGO_BIN_EXE_dreampolicy"))

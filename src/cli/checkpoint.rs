@@ -1,26 +1,98 @@
-//! `dreampolicy checkpoint verify|seal`: the integrity seal of checkpoint files
-//! (`dreampolicy::checkpoint`: a SHA-256 in the archive's zip comment, checked
-//! at every load).
-use std::path::PathBuf;
+//! `dreampolicy checkpoint verify|seal`: the integrity seals of the files a
+//! later run trusts. By kind: a checkpoint (`*.pt`: a SHA-256 in the archive's
+//! zip comment, `dreampolicy::checkpoint`), a run's `config.yaml` (a seal line,
+//! `dreampolicy::seal`), a dataset's `stats.json` (a `"sha256"` first key), an
+//! export bundle's directory (`deploy.yaml` with the digests of its policy files).
+use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use clap::Subcommand;
+use dreampolicy::seal::{self, SealError};
 
 #[derive(Subcommand)]
 pub enum CheckpointCommand {
-    /// Check the seal of checkpoint files (PPO and world model): one `ok` or
-    /// `BAD` line per file; exits non-zero naming the bad ones.
+    /// Check the seals of checkpoints (PPO and world model), run configs
+    /// (`config.yaml`), dataset statistics (`stats.json`) and bundle
+    /// directories: one `ok` or `BAD` line per file; exits non-zero naming the
+    /// bad ones.
     Verify {
         #[arg(required = true)]
         files: Vec<PathBuf>,
     },
-    /// Seal checkpoint files written before checkpoints were sealed. Only for
-    /// files you trust: nothing can tell whether their bytes are the ones that
-    /// were saved. A sealed file is refused.
+    /// Seal files written before they were sealed, or a run config or bundle
+    /// you edited on purpose. Only for files you trust: nothing can tell whether
+    /// their bytes are the ones that were saved. A sealed checkpoint is refused.
     Seal {
         #[arg(required = true)]
         files: Vec<PathBuf>,
     },
+}
+
+/// What kind of sealed file a path is.
+enum Kind {
+    Checkpoint,
+    Yaml,
+    Json,
+    Bundle,
+}
+
+fn kind(path: &Path) -> Kind {
+    if path.is_dir() {
+        return Kind::Bundle;
+    }
+    match path.extension().and_then(|e| e.to_str()) {
+        Some("yaml" | "yml") => Kind::Yaml,
+        Some("json") => Kind::Json,
+        _ => Kind::Checkpoint,
+    }
+}
+
+fn read_text(path: &Path) -> Result<String> {
+    std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))
+}
+
+fn verify_one(path: &Path) -> Result<()> {
+    let named = |e: SealError| anyhow::anyhow!("{} {e}", path.display());
+    match kind(path) {
+        Kind::Checkpoint => dreampolicy::checkpoint::verify_file(path)?,
+        Kind::Yaml => seal::check_yaml(&read_text(path)?).map_err(named)?,
+        Kind::Json => seal::check_json(&read_text(path)?).map_err(named)?,
+        Kind::Bundle => {
+            dreampolicy::deploy::Bundle::read(path)?;
+        }
+    }
+    Ok(())
+}
+
+fn seal_one(path: &Path) -> Result<()> {
+    match kind(path) {
+        Kind::Checkpoint => dreampolicy::checkpoint::seal_file(path)?,
+        Kind::Yaml => {
+            let text = read_text(path)?;
+            serde_yaml::from_str::<serde_yaml::Value>(&text)
+                .with_context(|| format!("{} is not YAML", path.display()))?;
+            dreampolicy::run::write_atomic(path, seal::seal_yaml(&text).as_bytes())
+                .map_err(|(p, e)| anyhow::anyhow!("{}: {e}", p.display()))?;
+        }
+        Kind::Json => {
+            let text = read_text(path)?;
+            let mut value: serde_json::Value = serde_json::from_str(&text)
+                .with_context(|| format!("{} is not JSON", path.display()))?;
+            if seal::check_json(&text).is_ok() {
+                bail!("{} {}", path.display(), SealError::AlreadySealed);
+            }
+            if let Some(o) = value.as_object_mut() {
+                o.remove("sha256"); // a damaged seal's key
+            }
+            let pretty = serde_json::to_string_pretty(&value)?;
+            let sealed =
+                seal::seal_json(&pretty).map_err(|e| anyhow::anyhow!("{} {e}", path.display()))?;
+            dreampolicy::run::write_atomic(path, sealed.as_bytes())
+                .map_err(|(p, e)| anyhow::anyhow!("{}: {e}", p.display()))?;
+        }
+        Kind::Bundle => dreampolicy::deploy::Bundle::seal_dir(path)?,
+    }
+    Ok(())
 }
 
 pub fn run(which: CheckpointCommand) -> Result<()> {
@@ -28,7 +100,7 @@ pub fn run(which: CheckpointCommand) -> Result<()> {
         CheckpointCommand::Verify { files } => {
             let mut bad = Vec::new();
             for f in &files {
-                match dreampolicy::checkpoint::verify_file(f) {
+                match verify_one(f) {
                     Ok(()) => println!("ok   {}", f.display()),
                     Err(e) => {
                         println!("BAD  {e}");
@@ -48,9 +120,9 @@ pub fn run(which: CheckpointCommand) -> Result<()> {
         }
         CheckpointCommand::Seal { files } => {
             for f in &files {
-                dreampolicy::checkpoint::seal_file(f)?;
+                seal_one(f)?;
                 eprintln!(
-                    "warning: sealed {} as it is; its weights were not checked against anything",
+                    "warning: sealed {} as it is; its contents were not checked against anything",
                     f.display()
                 );
             }

@@ -92,8 +92,11 @@ where
     }
     match &args.resume {
         Some(dir) => {
-            let cfg = load(&dir.join("config.yaml"), &sets)
+            let cfg_path = dir.join("config.yaml");
+            dreampolicy::config::require_seal(&cfg_path)
                 .with_context(|| format!("resuming {}", dir.display()))?;
+            let cfg =
+                load(&cfg_path, &sets).with_context(|| format!("resuming {}", dir.display()))?;
             Ok((cfg, dir.clone()))
         }
         None => {

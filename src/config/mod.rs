@@ -7,7 +7,8 @@
 //! `configs/specialist/`; its `env` section is `env::config`, its reward table
 //! `env::rewards`) and `world_model::config` (a dataset plus the diffusion
 //! world model: `configs/world_model/`). All structs use `deny_unknown_fields`.
-//! This module sits below all of them and imports none.
+//! This module sits below all of them and imports none of them (only the
+//! leaf [`crate::seal`], whose seal a run directory's `config.yaml` carries).
 use std::path::{Path, PathBuf};
 
 /// Everything that can go wrong reading a config.
@@ -23,6 +24,21 @@ pub enum ConfigError {
     Parse { path: String, message: String },
     #[error("--set {arg}: {message}")]
     Override { arg: String, message: String },
+    #[error(
+        "config {path} is corrupt: its SHA-256 does not match the seal on its last line \
+         (`# dreampolicy-sha256: ...`, written with the run): a damaged copy or a hand edit. \
+         Restore it, pass changes with --set, or accept an edit with \
+         `dreampolicy checkpoint seal {path}`",
+        path = .path.display()
+    )]
+    Corrupt { path: PathBuf },
+    #[error(
+        "config {path} carries no seal (written before run configs were sealed, or by hand): \
+         a run directory's config.yaml is trusted only sealed; if you trust it, seal it with \
+         `dreampolicy checkpoint seal {path}`",
+        path = .path.display()
+    )]
+    Unsealed { path: PathBuf },
     #[error("config: {0}")]
     Invalid(String),
 }
@@ -56,12 +72,36 @@ pub fn parse_value<T: serde::de::DeserializeOwned>(
     })
 }
 
-/// Read a file's text for a loader.
+/// Read a file's text for a loader. A file that ends in a seal line (a run
+/// directory's `config.yaml`, [`crate::seal::seal_yaml`]) must match it; a file
+/// without one (a config a person wrote) is read as it is.
 pub fn read(path: &Path) -> Result<String, ConfigError> {
-    std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+    let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
         path: path.to_path_buf(),
         source,
-    })
+    })?;
+    if crate::seal::check_yaml(&text) == Err(crate::seal::SealError::Mismatch) {
+        return Err(ConfigError::Corrupt {
+            path: path.to_path_buf(),
+        });
+    }
+    Ok(text)
+}
+
+/// Check that the file at `path` carries an intact seal: a run directory's
+/// `config.yaml`, which `--resume` trusts, must (a copy cut short loses its
+/// seal line and could still parse).
+pub fn require_seal(path: &Path) -> Result<(), ConfigError> {
+    let text = read(path)?;
+    match crate::seal::check_yaml(&text) {
+        Ok(()) => Ok(()),
+        Err(crate::seal::SealError::Missing) => Err(ConfigError::Unsealed {
+            path: path.to_path_buf(),
+        }),
+        Err(_) => Err(ConfigError::Corrupt {
+            path: path.to_path_buf(),
+        }),
+    }
 }
 
 /// `a.b.c=value`: set a nested key (created if missing); the value is parsed as YAML.

@@ -128,26 +128,45 @@ impl DatasetStats {
         Ok(b.finish())
     }
 
-    /// Write `dir/stats.json` (through a temporary name).
+    /// Write `dir/stats.json`, sealed ([`crate::seal::seal_json`]: its first key
+    /// `"sha256"` is the digest of the rest), through a temporary name.
     pub fn save(&self, dir: &Path) -> Result<(), DataError> {
         let path = dir.join(STATS_FILE);
-        let tmp = dir.join(format!("{STATS_FILE}.tmp"));
-        let text = serde_json::to_string_pretty(self).map_err(|e| DataError::Json {
+        let json_err = |why: String| DataError::Json {
             path: path.clone(),
-            why: e.to_string(),
-        })?;
-        std::fs::write(&tmp, text).map_err(|e| DataError::io(&tmp, e))?;
-        std::fs::rename(&tmp, &path).map_err(|e| DataError::io(&path, e))
+            why,
+        };
+        let text = serde_json::to_string_pretty(self).map_err(|e| json_err(e.to_string()))?;
+        let sealed = crate::seal::seal_json(&text).map_err(|e| json_err(e.to_string()))?;
+        crate::run::write_atomic(&path, sealed.as_bytes()).map_err(|(p, e)| DataError::io(&p, e))
     }
 
-    /// Read `dir/stats.json`; its dims must be `expected`.
+    /// Read `dir/stats.json`, check its seal; its dims must be `expected`.
     pub fn load(dir: &Path, expected: Dims) -> Result<DatasetStats, DataError> {
         let path = dir.join(STATS_FILE);
         let text = std::fs::read_to_string(&path).map_err(|e| DataError::io(&path, e))?;
-        let s: DatasetStats = serde_json::from_str(&text).map_err(|e| DataError::Json {
-            path: path.clone(),
-            why: e.to_string(),
-        })?;
+        if let Err(e) = crate::seal::check_json(&text) {
+            return Err(DataError::Json {
+                path,
+                why: format!(
+                    "{e}. Recompute it from the shards with `dreampolicy data inspect {} \
+                     --save-stats`",
+                    dir.display()
+                ),
+            });
+        }
+        // the seal's key, checked above, is not part of the statistics
+        let s = serde_json::from_str::<serde_json::Value>(&text)
+            .and_then(|mut v| {
+                if let Some(o) = v.as_object_mut() {
+                    o.remove("sha256");
+                }
+                serde_json::from_value::<DatasetStats>(v)
+            })
+            .map_err(|e| DataError::Json {
+                path: path.clone(),
+                why: e.to_string(),
+            })?;
         if s.dims != expected {
             return Err(DataError::DimMismatch {
                 path,

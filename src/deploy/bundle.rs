@@ -4,6 +4,8 @@
 //! scales; timing; the observation layout with its scales, noise and history
 //! rule; the scandots; the commands and the heading rule; the gait clock; the
 //! reset pose; the scene it was validated on; and the checkpoint's eval figures.
+//! `deploy.yaml` holds the SHA-256 of `policy.pt` and `policy.npz` and ends in
+//! its own seal line; [`Bundle::read`] checks all three.
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
@@ -52,6 +54,11 @@ pub struct Bundle {
     /// when there is one.
     #[serde(default)]
     pub eval: Option<serde_json::Value>,
+    /// SHA-256 of the bundle's other files by name (`policy.pt`, `policy.npz`),
+    /// checked by [`Bundle::read`]; `deploy.yaml` itself ends in its own seal
+    /// line ([`crate::seal::seal_yaml`]).
+    #[serde(default)]
+    pub files: std::collections::BTreeMap<String, String>,
 }
 
 /// The TorchScript file and its signature.
@@ -221,16 +228,21 @@ impl Bundle {
             path: path.clone(),
             source,
         })?;
-        let b: Bundle = serde_yaml::from_str(&text).map_err(|e| DeployError::Bundle {
-            path: path.clone(),
-            message: e.to_string(),
-        })?;
         let bad = |message: String| {
             Err(DeployError::Bundle {
                 path: path.clone(),
                 message,
             })
         };
+        if let Err(e) = crate::seal::check_yaml(&text) {
+            return bad(format!(
+                "{e}; or write the bundle again with `dreampolicy export`"
+            ));
+        }
+        let b: Bundle = serde_yaml::from_str(&text).map_err(|e| DeployError::Bundle {
+            path: path.clone(),
+            message: e.to_string(),
+        })?;
         if b.format != FORMAT {
             return bad(format!(
                 "format '{}', this build reads '{FORMAT}'",
@@ -264,7 +276,71 @@ impl Bundle {
         if b.scan.dim != b.policy.scan_dim || b.scan.nx * b.scan.ny != b.scan.dim {
             return bad("scan dims disagree with the policy's".into());
         }
+        b.check_files(dir)?;
         Ok(b)
+    }
+
+    /// Check the policy files against the digests `deploy.yaml` holds for them.
+    fn check_files(&self, dir: &Path) -> Result<(), DeployError> {
+        let path = dir.join(BUNDLE_FILE);
+        for name in [self.policy.file.as_str(), NPZ_FILE] {
+            let Some(digest) = self.files.get(name) else {
+                return Err(DeployError::Bundle {
+                    path,
+                    message: format!("holds no SHA-256 for {name}"),
+                });
+            };
+            let file = dir.join(name);
+            let found = crate::seal::file_sha256(&file).map_err(|source| DeployError::Io {
+                path: file.clone(),
+                source,
+            })?;
+            if &found != digest {
+                return Err(DeployError::Bundle {
+                    path: file,
+                    message: format!(
+                        "is corrupt: its SHA-256 does not match the one in {BUNDLE_FILE} \
+                         (the file changed after `export` wrote it); export the bundle again"
+                    ),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Seal the bundle in `dir` as it is: record the SHA-256 of its policy files
+    /// in `deploy.yaml` and seal that (for a bundle written before bundles were
+    /// sealed, or edited on purpose; nothing checks the files against anything).
+    pub fn seal_dir(dir: &Path) -> Result<(), DeployError> {
+        let path = dir.join(BUNDLE_FILE);
+        let text = std::fs::read_to_string(&path).map_err(|source| DeployError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        let mut b: Bundle = serde_yaml::from_str(&text).map_err(|e| DeployError::Bundle {
+            path: path.clone(),
+            message: e.to_string(),
+        })?;
+        b.write_sealed(dir)
+    }
+
+    /// Fill [`Bundle::files`] from the files in `dir` and write `deploy.yaml`
+    /// sealed, atomically.
+    fn write_sealed(&mut self, dir: &Path) -> Result<(), DeployError> {
+        self.files.clear();
+        for name in [self.policy.file.clone(), NPZ_FILE.to_string()] {
+            let file = dir.join(&name);
+            let digest = crate::seal::file_sha256(&file)
+                .map_err(|source| DeployError::Io { path: file, source })?;
+            self.files.insert(name, digest);
+        }
+        let path = dir.join(BUNDLE_FILE);
+        let text = serde_yaml::to_string(self).map_err(|e| DeployError::Bundle {
+            path: path.clone(),
+            message: e.to_string(),
+        })?;
+        crate::run::write_atomic(&path, crate::seal::seal_yaml(&text).as_bytes())
+            .map_err(|(path, source)| DeployError::Io { path, source })
     }
 
     /// The observation field called `name`.
@@ -386,7 +462,7 @@ pub fn write_bundle(ck: &Checkpoint, dir: &Path) -> Result<BundleInfo, DeployErr
         .map(|run| run.join("eval.json"))
         .and_then(|p| std::fs::read_to_string(p).ok())
         .and_then(|t| serde_json::from_str(&t).ok());
-    let bundle = Bundle {
+    let mut bundle = Bundle {
         format: FORMAT.into(),
         policy: PolicySpec {
             file: POLICY_FILE.into(),
@@ -467,16 +543,10 @@ pub fn write_bundle(ck: &Checkpoint, dir: &Path) -> Result<BundleInfo, DeployErr
             pelvis_height: g1.stand_height + env.init.height_offset,
         },
         eval,
+        files: Default::default(),
     };
     let path = dir.join(BUNDLE_FILE);
-    let text = serde_yaml::to_string(&bundle).map_err(|e| DeployError::Bundle {
-        path: path.clone(),
-        message: e.to_string(),
-    })?;
-    std::fs::write(&path, text).map_err(|source| DeployError::Io {
-        path: path.clone(),
-        source,
-    })?;
+    bundle.write_sealed(dir)?;
     Ok(BundleInfo {
         dir: dir.display().to_string(),
         policy: policy_path.display().to_string(),

@@ -506,7 +506,9 @@ impl Sweep {
             .map(|k| format!("{k}={threads}"))
             .collect();
         if resume {
-            Ok(load(&run_dir.join("config.yaml"), &thread_sets)?)
+            let path = run_dir.join("config.yaml");
+            crate::config::require_seal(&path)?;
+            Ok(load(&path, &thread_sets)?)
         } else {
             self.run_config(r, &thread_sets, load)
         }
