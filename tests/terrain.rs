@@ -252,6 +252,56 @@ fn gaps_have_the_drawn_widths_depth_and_platforms() {
     }
 }
 
+/// `gap.depth` (a training curriculum): each gap draws its own depth, shallow
+/// at level 0 and up to the range's far end at the top; the paper's table
+/// (unset) keeps every gap a pit, as above.
+#[test]
+fn gap_depth_follows_its_curriculum_when_set() {
+    let mut cfg = TerrainConfig {
+        num_cols: 2,
+        kinds: [(TerrainKind::Gap, 1.0)].into(),
+        border: 1.0,
+        base_roughness: 0.0,
+        min_roughness: 0.0,
+        ..TerrainConfig::default()
+    };
+    cfg.gap.gap = Curriculum([0.05, 0.30]);
+    cfg.gap.depth = Some(Curriculum([0.05, 1.0]));
+    let map = TerrainMap::generate(&cfg, 9).unwrap();
+    let mut deepest = vec![0.0f64; map.num_levels()];
+    for level in 0..map.num_levels() {
+        let d = level as f64 / cfg.max_level() as f64;
+        for col in 0..map.num_cols() {
+            let t = Tile::of(&map, level, col);
+            let &TileParams::Gap {
+                x0,
+                count,
+                gap,
+                platform,
+            } = map.tile_params(level, col)
+            else {
+                panic!("{:?}", map.tile_params(level, col));
+            };
+            for k in 0..count {
+                let i = t.ix(x0 + k as f64 * (gap + platform));
+                let depth = -median((0..t.ny).map(|j| t.h(i, j)).collect());
+                let bound = cfg.gap.depth.unwrap().bound(d);
+                assert!(
+                    depth >= 0.05 - 1e-3 && depth <= bound + cfg.vertical_scale,
+                    "level {level}: gap {k} {depth} m deep, outside [0.05, {bound}]"
+                );
+                deepest[level] = deepest[level].max(depth);
+            }
+        }
+    }
+    assert!(deepest[0] <= 0.05 + cfg.vertical_scale, "{deepest:?}");
+    assert!(deepest[9] > 0.5, "{deepest:?}");
+    // a depth below zero is a config error naming the key
+    cfg.gap.depth = Some(Curriculum([-0.1, 1.0]));
+    let e = TerrainMap::generate(&cfg, 9).err().unwrap().to_string();
+    assert!(e.contains("gap.depth"), "{e}");
+}
+
 #[test]
 fn bridges_are_as_wide_as_drawn() {
     for c in cases(TerrainKind::Bridge) {

@@ -114,6 +114,12 @@ params!(
         gap: Curriculum = Curriculum([0.20, 0.30]),
         /// Number of gaps; capped so they fit the tile.
         count: Curriculum = Curriculum([5.0, 10.0]),
+        /// Depth of each gap (m), a training curriculum below the paper's
+        /// table: unset (the paper's table), every gap is a pit `pit_depth`
+        /// deep. One heightfield sample wide and a metre deep, a 5 cm gap is a
+        /// V-shaped slot 10 cm wide that traps the G1's foot capsules; shallow
+        /// gaps at the low levels let a foundation learn to step over them.
+        depth: Option<Curriculum> = None,
     }
 );
 
@@ -344,6 +350,11 @@ impl TerrainConfig {
             ("gap.platform", self.gap.platform, positive),
             ("gap.gap", self.gap.gap, positive),
             ("gap.count", self.gap.count, 1.0),
+            (
+                "gap.depth",
+                self.gap.depth.unwrap_or(Curriculum([1.0, 1.0])),
+                positive,
+            ),
             ("bridge.width", self.bridge.width, positive),
             ("wave.count", self.wave.count, 0.0),
             ("wave.amplitude", self.wave.amplitude, 0.0),

@@ -273,7 +273,11 @@ fn gaps<R: Rng + ?Sized>(
         None => {
             for k in 0..count {
                 let i = r.i0 + k * (gap + platform);
-                c.columns(i..i + gap, |_| pit);
+                let depth = match p.depth {
+                    Some(depth) => -quantize(depth.sample(d, rng), ctx.cfg.vertical_scale),
+                    None => pit,
+                };
+                c.columns(i..i + gap, |_| depth);
             }
         }
         Some(width) => {
