@@ -11,6 +11,7 @@
 //! * [`rl`] PPO on libtorch: actor-critic, storage, normalizers, checkpoints, runner
 //! * [`config`] serde structs of the YAML experiment files
 //! * [`world_model`] the terrain-aware autoregressive diffusion world model: DiT denoiser, DDPM/DDIM, CFG, scheduled-sampling trainer, rollout
+//! * [`unified`] the unified policy's parts: body-space kinematics and tracking terms, the diffusion-AMP discriminator, the world model's history and plan buffers
 //! * [`data`] the expert dataset: MCAP shards of frames, windows, split, shuffle, stats
 //! * [`checkpoint`] checkpoint files shared by the trainers: named tensors + a JSON record, written atomically
 //! * [`seal`] SHA-256 seals inside the YAML and JSON files a later run trusts (config.yaml, deploy.yaml, stats.json)
@@ -36,4 +37,5 @@ pub mod seal;
 pub mod sim;
 pub mod sweep;
 pub mod terrain;
+pub mod unified;
 pub mod world_model;

@@ -131,8 +131,9 @@ pub const LEG_KNEE: usize = 3;
 pub const LEG_ANKLE_PITCH: usize = 4;
 /// Waist and arm joints (canonical indices).
 pub const UPPER_BODY: std::ops::Range<usize> = 12..NUM_JOINTS;
-/// Bodies whose positions the world-model tracking reward compares.
-pub const TRACKED_BODIES: [&str; 13] = [
+/// Bodies the unified policy's body-space tracking reward compares
+/// (BeyondMimic's set for the G1: pelvis, legs, torso, arms, both wrists).
+pub const TRACKED_BODIES: [&str; 14] = [
     "pelvis",
     "left_hip_roll_link",
     "left_knee_link",
@@ -146,6 +147,7 @@ pub const TRACKED_BODIES: [&str; 13] = [
     "right_shoulder_roll_link",
     "right_elbow_link",
     "left_wrist_yaw_link",
+    "right_wrist_yaw_link",
 ];
 /// Name of the standing keyframe that holds the default pose.
 pub const STAND_KEY: &str = "stand";

@@ -125,6 +125,17 @@ impl Data {
         unsafe { sys::mj_kinematics(self.model.as_ptr(), self.ptr.as_ptr()) }
     }
 
+    /// `mj_comPos` then `mj_comVel`: `subtree_com` and the bodies' spatial
+    /// velocities `cvel` for the current poses and `qvel` (call
+    /// [`Data::kinematics`] first).
+    pub fn com_vel(&mut self) {
+        // SAFETY: as in step_unchecked.
+        unsafe {
+            sys::mj_comPos(self.model.as_ptr(), self.ptr.as_ptr());
+            sys::mj_comVel(self.model.as_ptr(), self.ptr.as_ptr());
+        }
+    }
+
     /// Reset to the model's qpos0 (`mj_resetData`).
     pub fn reset(&mut self) {
         // SAFETY: as in step_unchecked.
