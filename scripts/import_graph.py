@@ -17,6 +17,7 @@ LAYERS = [
     ["env"],
     ["data", "rl"],
     ["world_model"],
+    ["unified"],
     ["eval", "collect", "play", "deploy", "bench", "sweep"],
     ["cli", "main"],
 ]

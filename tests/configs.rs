@@ -61,8 +61,28 @@ fn every_shipped_config_loads() {
             assert!(!s.runs().is_empty(), "{}", f.display());
             continue;
         }
-        dreampolicy::rl::config::load(f, &[]).unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+        let c = dreampolicy::rl::config::load(f, &[])
+            .unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+        // a unified config's own section parses
+        if c.task == dreampolicy::rl::config::TaskKind::Unified {
+            let u = dreampolicy::unified::config::UnifiedConfig::of(&c)
+                .unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+            // the committed one, where the config names one (paper-scale configs
+            // name a run the user trains)
+            let wm = Path::new(env!("CARGO_MANIFEST_DIR")).join(&u.world_model);
+            if u.world_model.starts_with("models/") {
+                assert!(wm.is_file(), "{}: {} missing", f.display(), u.world_model);
+            }
+        }
     }
+    // a unified section's typo is refused with the key named
+    let tiny = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/test/unified_tiny.yaml");
+    let c = dreampolicy::rl::config::load(&tiny, &["unified.replan_evry=3".into()]).unwrap();
+    let e = dreampolicy::unified::config::UnifiedConfig::of(&c)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("replan_evry"), "{e}");
     // and a typo in a training section is refused with the key named
     let flat = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/specialist/flat.yaml");
     let e = dreampolicy::rl::config::load(&flat, &["ppo.learning_rat=1e-3".into()])

@@ -217,3 +217,78 @@ fn history_padding_and_plan_shifting_across_resets() {
     assert_eq!(p.future(0).0, [3.0, 3.0, 3.0]);
     assert_eq!(p.due().collect::<Vec<_>>(), [0, 1], "env 0 is 2 steps old");
 }
+
+/// A tiny unified run (the world model in the loop, the discriminator learning)
+/// stopped at its first checkpoint and resumed ends where the uninterrupted run
+/// ends: the same metrics rows (tracking scores, style reward and the
+/// discriminator's loss included), the same discriminator weights and moments.
+#[test]
+fn a_resumed_tiny_unified_run_is_bit_identical() {
+    use dreampolicy::rl::checkpoint::Checkpoint;
+    use dreampolicy::run::latest_checkpoint;
+    let cfg = common::load_config("test/unified_tiny.yaml", &[]);
+    let (a, b) = (
+        common::Scratch::new("uni-full"),
+        common::Scratch::new("uni-resumed"),
+    );
+    dreampolicy::unified::train(&cfg, &a.0, false, true).unwrap();
+    let mut half = cfg.clone();
+    half.train.iterations = cfg.train.save_interval;
+    dreampolicy::unified::train(&half, &b.0, false, true).unwrap();
+    dreampolicy::unified::train(&cfg, &b.0, true, true).unwrap();
+    let rows = |dir: &std::path::Path| -> (Vec<String>, Vec<Vec<String>>) {
+        let text = std::fs::read_to_string(dir.join("metrics.csv")).unwrap();
+        let mut lines = text.lines();
+        let header: Vec<String> = lines.next().unwrap().split(',').map(String::from).collect();
+        let keep: Vec<usize> = (0..header.len())
+            .filter(|&i| !header[i].contains("time") && !header[i].contains("per_s"))
+            .collect();
+        let rows = lines
+            .map(|l| {
+                let v: Vec<&str> = l.split(',').collect();
+                keep.iter().map(|&i| v[i].to_string()).collect()
+            })
+            .collect();
+        (header, rows)
+    };
+    let ((header, ra), (_, rb)) = (rows(&a.0), rows(&b.0));
+    assert_eq!(ra.len(), 4);
+    assert_eq!(ra, rb, "the resumed run's metrics differ");
+    for name in ["amp_loss", "track_pos", "style_reward", "wm_plans"] {
+        assert!(header.iter().any(|h| h == name), "no {name} column");
+    }
+    let at = |name: &str| header.iter().position(|h| h == name).unwrap();
+    let last = |dir: &std::path::Path, name: &str| -> f64 {
+        let text = std::fs::read_to_string(dir.join("metrics.csv")).unwrap();
+        let row: Vec<String> = text
+            .lines()
+            .last()
+            .unwrap()
+            .split(',')
+            .map(String::from)
+            .collect();
+        row[at(name)].parse().unwrap()
+    };
+    let track = last(&a.0, "track_pos");
+    assert!((0.0..=1.0).contains(&track), "track_pos {track}");
+    assert!(last(&a.0, "wm_plans") > 0.0);
+    assert!(last(&a.0, "amp_loss").is_finite());
+    let (ca, cb) = (
+        Checkpoint::read(&latest_checkpoint(&a.0)).unwrap(),
+        Checkpoint::read(&latest_checkpoint(&b.0)).unwrap(),
+    );
+    for name in [
+        "amp.disc.out.weight",
+        "amp.adam_m.disc.0.weight",
+        "amp.norm",
+        "amp.adam_step",
+    ] {
+        let (ta, tb) = (ca.task_tensor(name), cb.task_tensor(name));
+        let (ta, tb) = (ta.unwrap_or_else(|| panic!("no {name}")), tb.unwrap());
+        assert!(ta.equal(&tb), "{name} differs");
+    }
+    assert_eq!(
+        ca.task_tensor("amp.adam_step").unwrap().int64_value(&[0]),
+        8
+    );
+}

@@ -199,4 +199,5 @@ pub fn env(
 }
 pub mod data;
 pub mod ppo;
+pub mod unified;
 pub mod world_model;

@@ -20,6 +20,9 @@ pub enum BenchCommand {
     /// World-model sampling latency at batch 1 (DDPM, DDIM 5/10/20) against the
     /// control period, and the denoiser's forward against bare GEMMs of its shapes.
     WorldModel(WorldModelArgs),
+    /// PPO iterations with the world model in the loop (a `task: unified`
+    /// config): env-steps/s and `share_world_model`, beside the bare env's.
+    Unified(UnifiedArgs),
     /// Raw mj_step vs our safe Data::step on the standing G1.
     Sim(SimArgs),
     /// Raw physics vs VecEnv at 1 and 2 threads, scandots direct vs mj_ray.
@@ -75,6 +78,22 @@ pub struct PpoArgs {
     /// Only the config's network (skip the paper-sized variants).
     #[arg(long)]
     config_only: bool,
+}
+
+/// Arguments of `bench unified`.
+#[derive(clap::Args)]
+pub struct UnifiedArgs {
+    #[arg(long)]
+    json: bool,
+    #[arg(long, default_value = "configs/unified/small.yaml")]
+    config: PathBuf,
+    #[arg(long = "set")]
+    sets: Vec<String>,
+    /// Iterations measured (after `--warmup`).
+    #[arg(long, default_value_t = 3)]
+    iterations: usize,
+    #[arg(long, default_value_t = 1)]
+    warmup: usize,
 }
 
 /// Arguments of `bench world-model`.
@@ -138,9 +157,27 @@ pub fn run(which: BenchCommand) -> Result<()> {
         BenchCommand::Data(a) => data(a),
         BenchCommand::Ppo(a) => ppo(a),
         BenchCommand::WorldModel(a) => world_model(a),
+        BenchCommand::Unified(a) => unified(a),
         BenchCommand::Sim(a) => sim(a),
         BenchCommand::Env(a) => env(a),
     }
+}
+
+fn unified(a: UnifiedArgs) -> Result<()> {
+    let cfg = config::load(&a.config, &a.sets)?;
+    tch::set_num_threads(cfg.train.torch_threads as i32);
+    let b = dreampolicy::bench::unified::bench_unified(
+        &cfg,
+        &a.config.display().to_string(),
+        a.warmup,
+        a.iterations.max(1),
+    )?;
+    if a.json {
+        println!("{}", serde_json::to_string(&b)?);
+    } else {
+        println!("{}", serde_json::to_string_pretty(&b)?);
+    }
+    Ok(())
 }
 
 fn ppo(a: PpoArgs) -> Result<()> {

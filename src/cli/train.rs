@@ -1,5 +1,5 @@
-//! `dreampolicy train ...`: the PPO specialist and the diffusion world model,
-//! fresh or resumed.
+//! `dreampolicy train ...`: the PPO specialist, the diffusion world model and
+//! the unified policy, fresh or resumed.
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
@@ -11,6 +11,9 @@ pub enum TrainCommand {
     Specialist(TrainArgs),
     /// The diffusion world model on an expert dataset (configs/world_model/*.yaml).
     WorldModel(TrainArgs),
+    /// The unified policy: PPO against the world model's plans, with body-space
+    /// tracking and diffusion-AMP style rewards (configs/unified/*.yaml, `task: unified`).
+    Unified(TrainArgs),
 }
 
 /// What every trainer takes.
@@ -44,7 +47,22 @@ pub fn run(which: TrainCommand) -> Result<()> {
     match which {
         TrainCommand::Specialist(args) => train_specialist(args),
         TrainCommand::WorldModel(args) => train_world_model(args),
+        TrainCommand::Unified(args) => train_unified(args),
     }
+}
+
+fn train_unified(args: TrainArgs) -> Result<()> {
+    let (cfg, run_path) = train_setup(
+        &args,
+        &["env.threads", "train.torch_threads"],
+        dreampolicy::rl::config::load,
+    )?;
+    // the section is checked before a run directory is made
+    dreampolicy::unified::config::UnifiedConfig::of(&cfg)?;
+    let s = dreampolicy::unified::train(&cfg, &run_path, args.resume.is_some(), args.quiet)
+        .with_context(|| format!("training the unified policy in {}", run_path.display()))?;
+    println!("{}", serde_json::to_string(&s)?);
+    Ok(())
 }
 
 fn train_specialist(args: TrainArgs) -> Result<()> {

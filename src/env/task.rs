@@ -98,6 +98,29 @@ pub trait VecTask {
     fn mirror(&self) -> Option<crate::env::mirror::Mirror> {
         None
     }
+    /// Names of the task's own metrics (`metrics.csv` columns after the reward
+    /// terms): the unified task's discriminator and world model.
+    fn extra_metric_names(&self) -> Vec<&'static str> {
+        Vec::new()
+    }
+    /// Called by the trainer once per iteration, after the rollout: the task's
+    /// own learning (the unified task's discriminator updates); returns the
+    /// values of [`VecTask::extra_metric_names`].
+    fn after_rollout(&mut self) -> Result<Vec<f64>, String> {
+        Ok(Vec::new())
+    }
+    /// The task's learned state (named tensors) that a checkpoint keeps.
+    fn state_tensors(&self) -> Vec<(String, tch::Tensor)> {
+        Vec::new()
+    }
+    /// Restore [`VecTask::state_tensors`] from a checkpoint (`get` returns a
+    /// saved tensor by name).
+    fn load_state_tensors(
+        &mut self,
+        _get: &dyn Fn(&str) -> Option<tch::Tensor>,
+    ) -> Result<(), String> {
+        Ok(())
+    }
 }
 
 impl VecTask for VecEnv {

@@ -84,14 +84,19 @@ fn f64_tensor(v: &[f64]) -> Tensor {
     Tensor::from_slice(v)
 }
 
-/// Write `agent` (and `opt`) with `meta` to `path` atomically.
+/// Write `agent` (and `opt`, and the task's own learned state `task`, saved
+/// under `task.<name>`) with `meta` to `path` atomically.
 pub fn save(
     path: &Path,
     agent: &Agent,
     opt: Option<&Adam>,
+    task: Vec<(String, Tensor)>,
     meta: &CheckpointMeta,
 ) -> Result<(), RlError> {
-    let mut named: Vec<(String, Tensor)> = Vec::new();
+    let mut named: Vec<(String, Tensor)> = task
+        .into_iter()
+        .map(|(n, t)| (format!("task.{n}"), t.detach()))
+        .collect();
     for (name, t) in agent.policy.named_parameters() {
         named.push((format!("policy.{name}"), t.detach()));
     }
@@ -149,6 +154,14 @@ impl Checkpoint {
         )?)
     }
 
+    /// The task's saved state tensor `name` (saved as `task.<name>`).
+    pub fn task_tensor(&self, name: &str) -> Option<Tensor> {
+        self.file
+            .tensor(&format!("task.{name}"))
+            .ok()
+            .map(|t| t.shallow_clone())
+    }
+
     fn tensor(&self, name: &str) -> Result<&Tensor, RlError> {
         Ok(self.file.tensor(name)?)
     }
@@ -185,7 +198,15 @@ impl Checkpoint {
         let src_cfg = self.config()?;
         let src_scan = src_cfg.policy.scan_encoder.enabled && self.meta.dims.scan > 0;
         let dims = agent.dims();
-        if self.meta.dims != dims {
+        // a policy without scandots may go to a task whose scan slot differs
+        // (the unified policy's plan): its scan encoder starts fresh
+        let same = |a: TaskDims, b: TaskDims| {
+            a.obs == b.obs
+                && a.critic == b.critic
+                && a.action == b.action
+                && (!src_scan || a.scan == b.scan)
+        };
+        if !same(self.meta.dims, dims) {
             return Err(err(
                 &self.path,
                 format!(

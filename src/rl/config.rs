@@ -26,6 +26,12 @@ pub struct ExperimentConfig {
     pub train: TrainConfig,
     #[serde(default)]
     pub eval: EvalConfig,
+    /// The unified task's own section (`task: unified`): the world model, the
+    /// re-planning, the tracking and style rewards. Kept here as YAML so that
+    /// it travels with the config into run directories and checkpoints; its
+    /// layer (`unified::config`, above the world model) parses and validates it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unified: Option<serde_yaml::Value>,
 }
 
 /// The environment a config trains on.
@@ -37,6 +43,10 @@ pub enum TaskKind {
     G1,
     /// MuJoCo cart-pole balancing (`env.n_envs`, `env.seed` only): tests PPO.
     Cartpole,
+    /// The unified policy (the paper's stage 3): the G1 env with the world
+    /// model's plan as the policy's future input and tracking and style
+    /// rewards (`unified:`); trained by `train unified`.
+    Unified,
 }
 
 impl ExperimentConfig {
@@ -46,6 +56,11 @@ impl ExperimentConfig {
         self.policy.validate()?;
         self.ppo.validate()?;
         self.train.validate()?;
+        if self.unified.is_some() != (self.task == TaskKind::Unified) {
+            return Err(ConfigError::Invalid(
+                "a `unified:` section goes with `task: unified`, and only with it".into(),
+            ));
+        }
         self.eval.validate()
     }
 }

@@ -60,11 +60,12 @@ pub fn plot_run(run_dir: &Path) -> Result<PathBuf, crate::plot::PlotError> {
     crate::run::plot_training(run_dir, &panels)
 }
 
-/// Metrics columns of a task: [`COLUMNS`] then `rew_<term>`.
+/// Metrics columns of a task: [`COLUMNS`], `rew_<term>`, then the task's own metrics.
 pub fn columns(task: &dyn VecTask) -> Vec<String> {
     COLUMNS
         .iter()
         .map(|c| c.to_string())
         .chain(task.reward_names().iter().map(|n| format!("rew_{n}")))
+        .chain(task.extra_metric_names().iter().map(|n| n.to_string()))
         .collect()
 }

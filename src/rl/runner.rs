@@ -142,6 +142,8 @@ impl<'a, T: VecTask> Trainer<'a, T> {
             }
             task.restore(&m.snapshots)
                 .map_err(|e| RlError::Invalid(format!("{}: {e}", ck.path.display())))?;
+            task.load_state_tensors(&|name| ck.task_tensor(name))
+                .map_err(|e| RlError::Invalid(format!("{}: {e}", ck.path.display())))?;
             task.set_penalty_scale(m.penalty_scale);
             task.reset_all();
             (iteration, env_steps, wall_offset) = (m.iteration, m.env_steps, m.wall_time_s);
@@ -253,6 +255,7 @@ impl<'a, T: VecTask> Trainer<'a, T> {
             self.times.inference += (t1 - t0).as_secs_f64() + (t3 - t2).as_secs_f64();
             self.times.physics += (t2 - t1).as_secs_f64();
         }
+        rs.extra = self.task.after_rollout().map_err(RlError::Invalid)?;
         let t0 = Instant::now();
         // values of the states after the last step; `prepare` is not called here:
         // it would count these states into the normalizers a second time (the
@@ -332,7 +335,13 @@ impl<'a, T: VecTask> Trainer<'a, T> {
             ),
             penalty_scale: self.task.penalty_scale(),
         };
-        checkpoint::save(path, &self.agent, Some(&self.ppo.opt), &meta)?;
+        checkpoint::save(
+            path,
+            &self.agent,
+            Some(&self.ppo.opt),
+            self.task.state_tensors(),
+            &meta,
+        )?;
         self.task.reset_all();
         self.agent.reset_history(&*self.task);
         self.stats.reset();
@@ -368,6 +377,8 @@ pub struct RolloutStats {
     pub terms: Vec<f64>,
     /// Penalty-curriculum scale during this rollout.
     pub penalty_scale: f64,
+    /// The task's own metrics ([`VecTask::extra_metric_names`]).
+    pub extra: Vec<f64>,
 }
 
 /// Train to `cfg.train.iterations` in `run`, from scratch or from `resume`;
@@ -438,6 +449,7 @@ pub fn learn<T: VecTask>(
             rs.penalty_scale,
         ];
         row.extend(&rs.terms);
+        row.extend(&rs.extra);
         run.metrics_row(&row)?;
         last = (rs.mean_return, rs.mean_length);
         progress.set(
@@ -511,10 +523,16 @@ pub fn train(
             let mut env = crate::env::cartpole::CartPole::new(n, cfg.env.seed)?;
             train_task(cfg, &mut env, run_dir, resume, quiet)
         }
+        TaskKind::Unified => Err(RlError::Invalid(
+            "task: unified trains with `dreampolicy train unified`".into(),
+        )),
     }
 }
 
-fn train_task<T: VecTask>(
+/// Train `task` in `run_dir` (fresh, or resumed from the run's latest
+/// checkpoint when `resume`): the run directory, metrics, checkpoints and
+/// summary every trainer shares.
+pub fn train_task<T: VecTask>(
     cfg: &ExperimentConfig,
     task: &mut T,
     run_dir: &Path,

@@ -1,0 +1,139 @@
+//! The `unified:` section of a `task: unified` config (`configs/unified/`).
+use serde::{Deserialize, Serialize};
+
+use super::amp::AmpConfig;
+use super::track::TrackingSigmas;
+use crate::config::ConfigError;
+use crate::rl::config::{ExperimentConfig, TaskKind};
+use crate::world_model::config::SamplingConfig;
+
+/// The world model in the loop and the unified policy's own rewards.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct UnifiedConfig {
+    /// The world-model checkpoint (`train world-model`'s `checkpoints/latest.pt`).
+    pub world_model: String,
+    /// Sampler, DDIM steps and guidance ω of the plans.
+    #[serde(default)]
+    pub sampling: SamplingConfig,
+    /// A new plan every `replan_every` control steps (batched over the envs
+    /// that are due); in between, the plan shifts by one state. 1 = the paper's
+    /// every-step sampling.
+    #[serde(default = "default_replan")]
+    pub replan_every: usize,
+    /// Predicted states the policy's future encoder reads (the first ones of
+    /// the plan); default: all `H`.
+    #[serde(default)]
+    pub future_states: Option<usize>,
+    #[serde(default)]
+    pub tracking: TrackingConfig,
+    #[serde(default)]
+    pub amp: AmpConfig,
+    /// Weight of the diffusion-AMP style reward (the paper's 0.25).
+    #[serde(default = "default_style")]
+    pub style_weight: f64,
+    /// Seed of the plans' sampling noise (mixed with the envs' RNG states at
+    /// every reset of the batch, so that a resumed run draws the same noise).
+    #[serde(default)]
+    pub seed: u64,
+}
+
+fn default_replan() -> usize {
+    5
+}
+
+fn default_style() -> f64 {
+    0.25
+}
+
+/// The four body-space tracking terms: weights (the paper's 1.0 each) and tolerances.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrackingConfig {
+    /// Weights of position, orientation, linear and angular velocity.
+    pub weights: [f64; 4],
+    pub sigmas: TrackingSigmas,
+}
+
+impl Default for TrackingConfig {
+    fn default() -> Self {
+        TrackingConfig {
+            weights: [1.0; 4],
+            sigmas: TrackingSigmas::default(),
+        }
+    }
+}
+
+impl UnifiedConfig {
+    /// The `unified:` section of `cfg`, parsed and checked; `cfg` must be a
+    /// `task: unified` config.
+    pub fn of(cfg: &ExperimentConfig) -> Result<UnifiedConfig, ConfigError> {
+        if cfg.task != TaskKind::Unified {
+            return Err(ConfigError::Invalid(
+                "not a unified config: set `task: unified` and a `unified:` section".into(),
+            ));
+        }
+        let value = cfg.unified.clone().ok_or_else(|| {
+            ConfigError::Invalid("task: unified needs a `unified:` section".into())
+        })?;
+        let u: UnifiedConfig = serde_yaml::from_value(value).map_err(|e| ConfigError::Parse {
+            path: "unified".into(),
+            message: e.to_string(),
+        })?;
+        u.validate()?;
+        Ok(u)
+    }
+
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let bad =
+            |key: &str, why: String| Err(ConfigError::Invalid(format!("unified.{key}: {why}")));
+        if self.world_model.trim().is_empty() {
+            return bad("world_model", "names no checkpoint".into());
+        }
+        if self.replan_every == 0 {
+            return bad("replan_every", "must be at least 1".into());
+        }
+        if self.future_states == Some(0) {
+            return bad("future_states", "must be at least 1".into());
+        }
+        let t = &self.tracking;
+        if t.weights.iter().any(|w| !w.is_finite()) {
+            return bad(
+                "tracking.weights",
+                format!("{:?} must be finite", t.weights),
+            );
+        }
+        let s = &t.sigmas;
+        for (k, v) in [
+            ("pos", s.pos),
+            ("ori", s.ori),
+            ("lin_vel", s.lin_vel),
+            ("ang_vel", s.ang_vel),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return bad(
+                    &format!("tracking.sigmas.{k}"),
+                    format!("{v} must be positive"),
+                );
+            }
+        }
+        if !self.style_weight.is_finite() {
+            return bad("style_weight", "must be finite".into());
+        }
+        let a = &self.amp;
+        if a.updates == 0 || a.batch == 0 || a.hidden.is_empty() || a.hidden.iter().any(|&h| h < 1)
+        {
+            return bad(
+                "amp",
+                "updates, batch and every hidden size must be at least 1".into(),
+            );
+        }
+        if !(a.learning_rate > 0.0 && a.grad_penalty >= 0.0 && a.logit_reg >= 0.0) {
+            return bad(
+                "amp",
+                "learning_rate must be positive, grad_penalty and logit_reg not negative".into(),
+            );
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,494 @@
+//! [`UnifiedTask`]: the G1 env with the world model in the loop, as a
+//! [`VecTask`] that the PPO trainer steps like any other (the PPO loop is not
+//! forked).
+//!
+//! Per control step:
+//! 1. the env steps; its reward table holds the paper's regularization and
+//!    safety terms (`env.rewards`);
+//! 2. each env that did not just reset adds the four tracking scores of its
+//!    body-space state against the plan's next state `ŝ_{t+1}`
+//!    ([`super::track`]), and the style reward of its transition
+//!    `(s_t, s_{t+1})` under the discriminator ([`super::amp`]), each times its
+//!    weight and the control `dt` (the env's convention);
+//! 3. the histories take `s_{t+1}` (a reset fills them with the new `s_0`),
+//!    the plans shift by one, and the envs whose plan is `replan_every` steps
+//!    old or gone get a new one, in one batched world-model call from their
+//!    last `K` states and live scandots;
+//! 4. the policy's "scan" input is the plan: the first `future_states`
+//!    predicted states (the future encoder is the agent's scan encoder, an MLP).
+//!
+//! The states are the env's actor states (with its observation noise), as the
+//! dataset recorded them. Each plan made at `t` also gives the discriminator a
+//! real transition `(s_t, ŝ_{t+1})`; the policy's `(s_t, s_{t+1})` are the fake
+//! ones; [`VecTask::after_rollout`] updates it once per iteration on both.
+use std::collections::HashMap;
+use std::path::Path;
+
+use rand::{Rng, SeedableRng};
+use tch::{Device, Kind, Tensor};
+
+use super::amp::{AmpStats, Discriminator};
+use super::config::UnifiedConfig;
+use super::fk::BodyFk;
+use super::plan::{History, Plan};
+use super::track::TrackingErrors;
+use crate::env::obs::{CRITIC_DIM, OBS_DIM, SCAN_DIM};
+use crate::env::task::{EnvSnapshot, TaskDims, VecTask};
+use crate::env::{Outcome, StepInfo, VecEnv};
+use crate::rl::config::ExperimentConfig;
+use crate::rl::RlError;
+use crate::world_model::sampler::Noise;
+use crate::world_model::WorldModel;
+
+/// Names of the task's own metrics (`metrics.csv`).
+pub const METRICS: [&str; 13] = [
+    "amp_loss",
+    "amp_grad_penalty",
+    "amp_d_real",
+    "amp_d_fake",
+    "amp_accuracy",
+    "style_reward",
+    "track_pos",
+    "track_ori",
+    "track_lin_vel",
+    "track_ang_vel",
+    "wm_time_s",
+    "wm_plans",
+    "wm_nonfinite",
+];
+
+/// Sums over the steps of a rollout, for the metrics.
+#[derive(Debug, Default, Clone)]
+struct Sums {
+    track: [f64; 4],
+    tracked: usize,
+    style: f64,
+    styled: usize,
+    wm_time: f64,
+    plans: usize,
+    nonfinite: usize,
+}
+
+pub struct UnifiedTask {
+    env: VecEnv,
+    wm: WorldModel,
+    pub cfg: UnifiedConfig,
+    fk: BodyFk,
+    pub disc: Discriminator,
+    history: History,
+    plan: Plan,
+    noise: Noise,
+    /// Predicted states the policy reads.
+    future: usize,
+    dt: f64,
+    scan: Vec<f32>,
+    final_scan: Vec<f32>,
+    outcomes: Vec<Outcome>,
+    prev_obs: Vec<f32>,
+    /// This iteration's discriminator samples: feature rows.
+    real: Vec<f32>,
+    fake: Vec<f32>,
+    sums: Sums,
+}
+
+impl UnifiedTask {
+    /// The env of `cfg.env` with the world model of `cfg.unified` (`task: unified`).
+    pub fn new(cfg: &ExperimentConfig) -> Result<UnifiedTask, RlError> {
+        let u = UnifiedConfig::of(cfg)?;
+        let wm = WorldModel::load(Path::new(&u.world_model), Device::Cpu)
+            .map_err(|e| RlError::Invalid(format!("unified.world_model: {e}")))?;
+        let (sd, cd) = wm.net.dims();
+        if sd != OBS_DIM || cd != SCAN_DIM {
+            return Err(RlError::Invalid(format!(
+                "unified.world_model {}: states of {sd} and scandots of {cd}, the G1 env has {OBS_DIM} and {SCAN_DIM}",
+                u.world_model
+            )));
+        }
+        let (k, h) = (wm.history(), wm.horizon());
+        let future = u.future_states.unwrap_or(h);
+        if future > h {
+            return Err(RlError::Invalid(format!(
+                "unified.future_states {future} is more than the world model's horizon {h}"
+            )));
+        }
+        let env = VecEnv::new(&cfg.env)?;
+        let n = env.n_envs();
+        let model = env.envs()[0].data().model().clone();
+        let fk = BodyFk::new(model, &cfg.env.observation.scales)
+            .map_err(|e| RlError::Invalid(format!("tracked bodies: {e}")))?;
+        tch::manual_seed(cfg.train.seed as i64 ^ 0x00A1_1CE5);
+        let disc = Discriminator::new(&u.amp, Device::Cpu);
+        let dt = env.shared().dt;
+        let mut t = UnifiedTask {
+            history: History::new(n, k, OBS_DIM),
+            plan: Plan::new(n, h, OBS_DIM, u.replan_every),
+            noise: Noise::new(u.seed),
+            future,
+            dt,
+            scan: vec![0.0; n * future * OBS_DIM],
+            final_scan: vec![0.0; n * future * OBS_DIM],
+            outcomes: vec![Outcome::default(); n],
+            prev_obs: vec![0.0; n * OBS_DIM],
+            real: Vec::new(),
+            fake: Vec::new(),
+            sums: Sums::default(),
+            env,
+            wm,
+            cfg: u,
+            fk,
+            disc,
+        };
+        t.start_all();
+        Ok(t)
+    }
+
+    /// The env underneath.
+    pub fn env(&self) -> &VecEnv {
+        &self.env
+    }
+
+    /// The world model's `K`.
+    pub fn history_len(&self) -> usize {
+        self.history.len()
+    }
+
+    /// The world model's `H`.
+    pub fn horizon(&self) -> usize {
+        self.plan.horizon()
+    }
+
+    /// Every env's plan, `[n, H * OBS_DIM]`.
+    pub fn plans(&self) -> &[f32] {
+        self.plan.rows()
+    }
+
+    /// After every env was reset: histories of `s_0`, fresh plans, the sampling
+    /// noise reseeded from the envs' RNG states (a resumed run restores them,
+    /// so it draws the same noise), the discriminator samples and the metric
+    /// sums dropped.
+    fn start_all(&mut self) {
+        let n = self.env.n_envs();
+        for i in 0..n {
+            let obs = &self.env.obs[i * OBS_DIM..(i + 1) * OBS_DIM];
+            self.history.reset(i, obs);
+            self.plan.invalidate(i);
+        }
+        let mut seed = self.cfg.seed ^ 0x9E37_79B9_7F4A_7C15;
+        for s in self.env.snapshot() {
+            for b in s.rng_seed {
+                seed = (seed ^ u64::from(b)).wrapping_mul(0x0100_0000_01B3);
+            }
+            seed = (seed ^ s.rng_stream ^ s.rng_word_pos as u64).wrapping_mul(0x0100_0000_01B3);
+        }
+        self.noise = Noise::new(seed);
+        self.real.clear();
+        self.fake.clear();
+        // the next rollout's sums start here (a resumed run builds the task and
+        // then resets it: one start's plans count, as in an unbroken run)
+        self.sums = Sums::default();
+        self.replan();
+        self.write_scan();
+    }
+
+    /// One batched world-model call for every env whose plan is due. A plan
+    /// the world model cannot give (a non-finite state) holds the env's
+    /// current state instead, and is counted (`wm_nonfinite`).
+    fn replan(&mut self) {
+        let due: Vec<usize> = self.plan.due().collect();
+        if due.is_empty() {
+            return;
+        }
+        let t0 = std::time::Instant::now();
+        let (k, h, d) = (self.history.len(), self.plan.horizon(), OBS_DIM);
+        let b = due.len() as i64;
+        let mut hist = Vec::with_capacity(due.len() * k * d);
+        let mut scan = Vec::with_capacity(due.len() * SCAN_DIM);
+        for &i in &due {
+            hist.extend_from_slice(self.history.row(i));
+            scan.extend_from_slice(&self.env.scan[i * SCAN_DIM..(i + 1) * SCAN_DIM]);
+        }
+        let hist = Tensor::from_slice(&hist).view([b, k as i64, d as i64]);
+        let scan = Tensor::from_slice(&scan).view([b, SCAN_DIM as i64]);
+        // the shapes were checked when the task was built
+        let pred: Vec<f32> = self
+            .wm
+            .predict(&hist, &scan, &self.cfg.sampling, &mut self.noise)
+            .ok()
+            .and_then(|p| Vec::<f32>::try_from(p.to_kind(Kind::Float).flatten(0, -1)).ok())
+            .unwrap_or_else(|| vec![f32::NAN; due.len() * h * d]);
+        let mut held = vec![0.0f32; h * d];
+        for (j, &i) in due.iter().enumerate() {
+            let newest = &self.history.row(i)[(k - 1) * d..];
+            let mut row = &pred[j * h * d..(j + 1) * h * d];
+            if row.iter().any(|v| !v.is_finite()) {
+                for c in held.chunks_exact_mut(d) {
+                    c.copy_from_slice(newest);
+                }
+                row = &held;
+                self.sums.nonfinite += 1;
+            } else {
+                // a real transition for the discriminator: (s_t, ŝ_{t+1})
+                self.real
+                    .extend(Discriminator::features(newest, &row[..d], d));
+            }
+            self.plan.set(i, row);
+        }
+        self.sums.wm_time += t0.elapsed().as_secs_f64();
+        self.sums.plans += due.len();
+    }
+
+    /// The policy's future input: the first `future` states of each plan.
+    fn write_scan(&mut self) {
+        let w = self.future * OBS_DIM;
+        for i in 0..self.env.n_envs() {
+            let (plan, _) = self.plan.future(i);
+            self.scan[i * w..(i + 1) * w].copy_from_slice(&plan[..w]);
+        }
+    }
+
+    fn step_inner(&mut self, actions: &[f32]) -> StepInfo {
+        let n = self.env.n_envs();
+        self.prev_obs.copy_from_slice(&self.env.obs);
+        let mut info = self.env.step(actions);
+        self.outcomes.copy_from_slice(&self.env.outcomes);
+        let d = OBS_DIM;
+        let (w, u) = (&self.cfg.tracking.weights, &self.cfg);
+        // tracking against ŝ_{t+1}, and the policy's transitions
+        let mut fake_envs = Vec::with_capacity(n);
+        for i in 0..n {
+            if self.outcomes[i].episode_done {
+                continue;
+            }
+            if let (_, true) = self.plan.future(i) {
+                let desired = self.fk.from_state(self.plan.next(i));
+                let e = self.env.envs()[i].data();
+                let actual = self.fk.from_qpos(e.qpos(), e.qvel());
+                let s = TrackingErrors::between(&desired, &actual).scores(&u.tracking.sigmas);
+                let r: f64 = (0..4).map(|k| w[k] * s[k]).sum();
+                self.outcomes[i].reward += (r * self.dt) as f32;
+                for k in 0..4 {
+                    self.sums.track[k] += s[k];
+                }
+                self.sums.tracked += 1;
+            }
+            fake_envs.push(i);
+        }
+        if !fake_envs.is_empty() {
+            let mut s = Vec::with_capacity(fake_envs.len() * d);
+            let mut s2 = Vec::with_capacity(fake_envs.len() * d);
+            for &i in &fake_envs {
+                s.extend_from_slice(&self.prev_obs[i * d..(i + 1) * d]);
+                s2.extend_from_slice(&self.env.obs[i * d..(i + 1) * d]);
+            }
+            let rows = Discriminator::features(&s, &s2, d);
+            let style = self.disc.style_reward(&rows);
+            for (&i, &r) in fake_envs.iter().zip(&style) {
+                self.outcomes[i].reward += (u.style_weight * f64::from(r) * self.dt) as f32;
+                self.sums.style += f64::from(r);
+            }
+            self.sums.styled += style.len();
+            self.fake.extend(rows);
+        }
+        // histories and plans
+        self.plan.advance();
+        let fw = self.future * d;
+        for i in 0..n {
+            let obs = &self.env.obs[i * d..(i + 1) * d];
+            if self.outcomes[i].episode_done {
+                let (plan, _) = self.plan.future(i);
+                self.final_scan[i * fw..(i + 1) * fw].copy_from_slice(&plan[..fw]);
+                self.plan.invalidate(i);
+                self.history.reset(i, obs);
+            } else {
+                self.history.push(i, obs);
+            }
+        }
+        self.replan();
+        self.write_scan();
+        info.mean_reward = self
+            .outcomes
+            .iter()
+            .map(|o| f64::from(o.reward))
+            .sum::<f64>()
+            / n as f64;
+        info
+    }
+
+    /// Adam's moments and step, the weights and the input statistics of the
+    /// discriminator, by name.
+    fn disc_tensors(&self) -> Vec<(String, Tensor)> {
+        let mut out: Vec<(String, Tensor)> = self
+            .disc
+            .vs
+            .variables()
+            .into_iter()
+            .map(|(k, v)| (format!("amp.{k}"), v.detach()))
+            .collect();
+        for (k, v) in self.disc.adam.named_moments() {
+            out.push((format!("amp.{k}"), v));
+        }
+        out.push((
+            "amp.adam_step".into(),
+            Tensor::from_slice(&[self.disc.adam.step]),
+        ));
+        out.push((
+            "amp.norm".into(),
+            Tensor::from_slice(&self.disc.norm.to_vec()),
+        ));
+        out
+    }
+}
+
+impl VecTask for UnifiedTask {
+    fn dims(&self) -> TaskDims {
+        TaskDims {
+            obs: OBS_DIM,
+            critic: CRITIC_DIM,
+            scan: self.future * OBS_DIM,
+            action: crate::robot::NUM_JOINTS,
+        }
+    }
+    fn n_envs(&self) -> usize {
+        self.env.n_envs()
+    }
+    fn obs(&self) -> &[f32] {
+        &self.env.obs
+    }
+    fn critic(&self) -> &[f32] {
+        &self.env.critic
+    }
+    fn scan(&self) -> &[f32] {
+        &self.scan
+    }
+    fn final_critic(&self) -> &[f32] {
+        &self.env.final_critic
+    }
+    fn final_scan(&self) -> &[f32] {
+        &self.final_scan
+    }
+    fn outcomes(&self) -> &[Outcome] {
+        &self.outcomes
+    }
+    fn step(&mut self, actions: &[f32]) -> StepInfo {
+        self.step_inner(actions)
+    }
+    fn reset_all(&mut self) {
+        self.env.reset_all();
+        self.start_all();
+    }
+    fn snapshot(&self) -> Vec<EnvSnapshot> {
+        self.env.snapshot()
+    }
+    fn restore(&mut self, snaps: &[EnvSnapshot]) -> Result<(), String> {
+        self.env.restore(snaps)
+    }
+    fn reward_names(&self) -> Vec<&'static str> {
+        VecTask::reward_names(&self.env)
+    }
+    fn finished_episode_terms(&self) -> Option<Vec<(&'static str, f64)>> {
+        VecTask::finished_episode_terms(&self.env)
+    }
+    fn tracking_errors(&self) -> [f64; 2] {
+        VecTask::tracking_errors(&self.env)
+    }
+    fn mean_level(&self) -> f64 {
+        self.env.mean_terrain_level()
+    }
+    fn penalty_scale(&self) -> f64 {
+        VecTask::penalty_scale(&self.env)
+    }
+    fn set_penalty_scale(&mut self, scale: f64) {
+        self.env.set_penalty_scale(scale)
+    }
+    fn max_episode_steps(&self) -> u64 {
+        self.env.shared().max_episode_steps
+    }
+    fn extra_metric_names(&self) -> Vec<&'static str> {
+        METRICS.to_vec()
+    }
+    fn after_rollout(&mut self) -> Result<Vec<f64>, String> {
+        let row = 2 * super::amp::AMP_DIM;
+        let (nr, nf) = (self.real.len() / row, self.fake.len() / row);
+        let mut mean = AmpStats::default();
+        let mut done = 0usize;
+        if nr > 0 && nf > 0 {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(
+                self.cfg.seed ^ (self.disc.adam.step as u64).wrapping_mul(0x9E37_79B9),
+            );
+            let b = self.cfg.amp.batch;
+            for _ in 0..self.cfg.amp.updates {
+                let mut pick = |src: &[f32], n: usize| {
+                    let mut out = Vec::with_capacity(b * row);
+                    for _ in 0..b {
+                        let j = rng.random_range(0..n);
+                        out.extend_from_slice(&src[j * row..(j + 1) * row]);
+                    }
+                    out
+                };
+                let real = pick(&self.real, nr);
+                let fake = pick(&self.fake, nf);
+                let s = self.disc.update(&real, &fake);
+                mean.loss += s.loss;
+                mean.grad_penalty += s.grad_penalty;
+                mean.d_real += s.d_real;
+                mean.d_fake += s.d_fake;
+                mean.accuracy += s.accuracy;
+                done += 1;
+            }
+        }
+        self.real.clear();
+        self.fake.clear();
+        let m = |v: f64, n: usize| if n > 0 { v / n as f64 } else { f64::NAN };
+        let s = std::mem::take(&mut self.sums);
+        Ok(vec![
+            m(mean.loss, done),
+            m(mean.grad_penalty, done),
+            m(mean.d_real, done),
+            m(mean.d_fake, done),
+            m(mean.accuracy, done),
+            m(s.style, s.styled),
+            m(s.track[0], s.tracked),
+            m(s.track[1], s.tracked),
+            m(s.track[2], s.tracked),
+            m(s.track[3], s.tracked),
+            s.wm_time,
+            s.plans as f64,
+            s.nonfinite as f64,
+        ])
+    }
+    fn state_tensors(&self) -> Vec<(String, Tensor)> {
+        self.disc_tensors()
+    }
+    fn load_state_tensors(&mut self, get: &dyn Fn(&str) -> Option<Tensor>) -> Result<(), String> {
+        let names: Vec<String> = self.disc_tensors().into_iter().map(|(k, _)| k).collect();
+        let mut saved = HashMap::new();
+        for k in names {
+            let t = get(&k)
+                .ok_or_else(|| format!("the checkpoint holds no '{k}' (the discriminator)"))?;
+            saved.insert(k, t);
+        }
+        for (k, mut v) in self.disc.vs.variables() {
+            let src = &saved[&format!("amp.{k}")];
+            if src.size() != v.size() {
+                return Err(format!(
+                    "discriminator '{k}' has shape {:?}, the config's {:?} (amp.hidden changed?)",
+                    src.size(),
+                    v.size()
+                ));
+            }
+            tch::no_grad(|| v.copy_(src));
+        }
+        self.disc
+            .adam
+            .load_moments(|k| saved.get(&format!("amp.{k}")).ok_or(()))
+            .map_err(|()| "discriminator moments missing".to_string())?;
+        self.disc.adam.step = saved["amp.adam_step"].int64_value(&[0]);
+        let v = Vec::<f64>::try_from(&saved["amp.norm"].to_kind(Kind::Double))
+            .map_err(|e| e.to_string())?;
+        let frozen = self.disc.norm.frozen;
+        self.disc.norm = crate::rl::normalizer::RunningNorm::from_vec(2 * super::amp::AMP_DIM, &v)
+            .ok_or("discriminator input statistics of the wrong size")?;
+        self.disc.norm.frozen = frozen;
+        Ok(())
+    }
+}
