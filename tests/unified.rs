@@ -292,3 +292,55 @@ fn a_resumed_tiny_unified_run_is_bit_identical() {
         8
     );
 }
+
+/// The small config's start: foundation_sym transferred into the unified
+/// policy (zero columns for the future encoder, whose input is the plan, 8
+/// states of 98) acts exactly as the foundation on the unified task's states,
+/// so iteration 0 walks as the foundation does.
+#[test]
+fn the_foundation_transfers_into_the_unified_policy_acting_the_same() {
+    use dreampolicy::rl::checkpoint::Checkpoint;
+    use dreampolicy::rl::{Agent, VecTask};
+    use dreampolicy::unified::task::UnifiedTask;
+    let cfg = common::load_config("unified/small.yaml", &["env.n_envs=3"]);
+    let ck = Checkpoint::read(std::path::Path::new(
+        &cfg.train.init_checkpoint.clone().unwrap(),
+    ))
+    .unwrap();
+    let mut task = UnifiedTask::new(&cfg).unwrap();
+    assert_eq!(task.dims().scan, 8 * OBS_DIM);
+    let n = task.n_envs();
+    let old_cfg = ck.config().unwrap();
+    // the foundation's own dims (scandots it never read)
+    let old_dims = dreampolicy::rl::TaskDims {
+        scan: dreampolicy::env::obs::SCAN_DIM,
+        ..task.dims()
+    };
+    let mut old = Agent::new(&old_cfg.policy, old_dims, n, true);
+    ck.load_agent(&mut old).unwrap();
+    let mut new = Agent::new(&cfg.policy, task.dims(), n, true);
+    let t = ck.transfer_agent(&mut new).unwrap();
+    assert_eq!(t.widened, ["actor.0.weight", "critic.0.weight"]);
+    for a in [&mut old, &mut new] {
+        a.set_frozen(true);
+        a.reset_history(&task);
+    }
+    for _ in 0..6 {
+        old.prepare(&task);
+        new.prepare(&task);
+        let (a, b) = (old.act_mean(), new.act_mean());
+        let max = a
+            .iter()
+            .zip(&b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f32::max);
+        assert!(max < 1e-6, "actions differ by {max}");
+        task.step(&a);
+        old.after_step(&task);
+        new.after_step(&task);
+    }
+    // the plans are fed: finite, and not all the same
+    let s = task.scan();
+    assert!(s.iter().all(|v| v.is_finite()));
+    assert!(s.iter().any(|&v| v != s[0]));
+}
