@@ -7,6 +7,7 @@ mod common;
 use dreampolicy::env::obs::{CRITIC_DIM, GRAVITY, OBS_DIM};
 use dreampolicy::env::VecEnv;
 use dreampolicy::robot::NUM_JOINTS;
+use dreampolicy::terrain::TerrainKind;
 use dreampolicy::unified::amp::{AmpConfig, Discriminator, AMP_DIM, AMP_FEATURES};
 use dreampolicy::unified::fk::{quat_from_gravity, quat_mul, BodyFk, BodyFrames, N_TRACKED};
 use dreampolicy::unified::plan::{History, Plan};
@@ -291,6 +292,28 @@ fn a_resumed_tiny_unified_run_is_bit_identical() {
         ca.task_tensor("amp.adam_step").unwrap().int64_value(&[0]),
         8
     );
+
+    // `eval` runs a unified checkpoint through the paper's inference loop (the
+    // world model planning from the robot's history on the lane)
+    for terrain in [TerrainKind::Flat, TerrainKind::Gap] {
+        let o = dreampolicy::eval::EvalOptions {
+            terrain,
+            episodes: 2,
+            full_collision: true,
+            seed: 0,
+            threads: 1,
+            level: Some(0),
+        };
+        let r = dreampolicy::eval::evaluate(&ca, &o).unwrap();
+        assert_eq!(r.episodes, 2);
+        assert!((0.0..=1.0).contains(&r.completion_rate), "{r:?}");
+    }
+    // export does not write a bundle that would call the plan scandots
+    let e = dreampolicy::rl::export::export(&ca, &a.0.join("p.pt"))
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("unified") && e.contains("not built yet"), "{e}");
 }
 
 /// The small config's start: foundation_sym transferred into the unified

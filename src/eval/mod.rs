@@ -150,8 +150,8 @@ pub fn evaluate_in(
     let level = o.level.unwrap_or(cfg.eval.level);
     let mut t = Tally::default();
     if o.terrain == TerrainKind::Flat {
-        let mut env = VecEnv::new(env_cfg)?;
-        run_episodes(ck, cfg, &mut env, o.episodes, length, &mut t)?;
+        let env = VecEnv::new(env_cfg)?;
+        run_in(ck, cfg, env, o.episodes, length, &mut t)?;
     } else {
         let lanes = cfg.eval.lanes.clamp(1, o.episodes);
         for k in 0..lanes {
@@ -161,8 +161,8 @@ pub fn evaluate_in(
             lane_cfg.n_envs = env_cfg.n_envs.min(count as i64);
             lane_cfg.seed = o.seed.wrapping_add(1000 * k as u64);
             let scene = Scene::with_terrain(&lane_cfg, Some(Arc::new(lane.map().clone())))?;
-            let mut env = VecEnv::with_scene(&lane_cfg, scene)?;
-            run_episodes(ck, cfg, &mut env, count, length, &mut t)?;
+            let env = VecEnv::with_scene(&lane_cfg, scene)?;
+            run_in(ck, cfg, env, count, length, &mut t)?;
         }
     }
     let d = t.done as f64;
@@ -239,19 +239,19 @@ pub fn eval_table_name(cfg: &ExperimentConfig) -> &'static str {
 /// Run `episodes` counted episodes of the checkpoint's deterministic policy on
 /// `env`, adding them to `t`. An episode succeeds when the base is `length`
 /// metres past its spawn point along x.
-fn run_episodes(
+fn run_episodes<T: EvalTask>(
     ck: &Checkpoint,
     cfg: &ExperimentConfig,
-    env: &mut VecEnv,
+    task: &mut T,
     episodes: usize,
     length: f64,
     t: &mut Tally,
 ) -> Result<(), RlError> {
-    let n = env.n_envs();
-    let mut agent = Agent::new(&cfg.policy, env.dims(), n, cfg.ppo.normalize_obs);
+    let n = task.n_envs();
+    let mut agent = Agent::new(&cfg.policy, task.dims(), n, cfg.ppo.normalize_obs);
     ck.load_agent(&mut agent)?;
     agent.set_frozen(true);
-    agent.reset_history(&*env);
+    agent.reset_history(&*task);
     let target = t.done + episodes;
 
     // env i runs a counted episode while counted[i]; new episodes are counted
@@ -261,10 +261,10 @@ fn run_episodes(
     let (mut steps, mut speed) = (vec![0u64; n], vec![0.0f64; n]);
     let mut peak = vec![[Swing::default(); 2]; n];
     while t.done < target {
-        agent.step_mean(env);
+        agent.step_mean(task);
         for i in 0..n {
-            let out = env.outcomes[i];
-            let e = &env.envs()[i];
+            let out = task.outcomes()[i];
+            let e = &task.loco().envs()[i];
             let end = if out.episode_done {
                 // the env has reset: the episode's end is what it remembered
                 let last = e.last_episode_end();
@@ -308,12 +308,59 @@ fn run_episodes(
             speed[i] = 0.0;
             peak[i] = [Swing::default(); 2];
             if end == Ending::Success {
-                env.reset_env(i);
-                agent.reset_history_env(i, env.obs());
+                task.restart(i);
+                agent.reset_history_env(i, task.obs());
             }
         }
     }
     Ok(())
+}
+
+/// What an evaluation steps: the G1 env, or a unified policy's task around it
+/// (the paper's inference loop: the world model plans from the robot's history
+/// and the lane's scandots, the policy tracks the plan).
+pub trait EvalTask: VecTask {
+    /// The G1 env underneath (robot states, spawn points, episode ends).
+    fn loco(&self) -> &VecEnv;
+    /// Start env `i` on a new episode now.
+    fn restart(&mut self, i: usize);
+}
+
+impl EvalTask for VecEnv {
+    fn loco(&self) -> &VecEnv {
+        self
+    }
+    fn restart(&mut self, i: usize) {
+        self.reset_env(i);
+    }
+}
+
+impl EvalTask for crate::unified::task::UnifiedTask {
+    fn loco(&self) -> &VecEnv {
+        self.env()
+    }
+    fn restart(&mut self, i: usize) {
+        self.reset_env(i);
+    }
+}
+
+/// Run `episodes` on `env`, through the unified task when the checkpoint is a
+/// unified policy's.
+fn run_in(
+    ck: &Checkpoint,
+    cfg: &ExperimentConfig,
+    env: VecEnv,
+    episodes: usize,
+    length: f64,
+    t: &mut Tally,
+) -> Result<(), RlError> {
+    if cfg.task == crate::rl::config::TaskKind::Unified {
+        let mut task = crate::unified::task::UnifiedTask::with_env(cfg, env)?;
+        run_episodes(ck, cfg, &mut task, episodes, length, t)
+    } else {
+        let mut env = env;
+        run_episodes(ck, cfg, &mut env, episodes, length, t)
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -217,6 +217,14 @@ fn check(o: &PlayOptions) -> Result<(), PlayError> {
 pub fn play(ck: &Checkpoint, o: &PlayOptions) -> Result<PlaySummary, PlayError> {
     check(o)?;
     let cfg = ck.config()?;
+    if cfg.task == crate::rl::config::TaskKind::Unified {
+        return Err(RlError::Invalid(format!(
+            "{}: a unified policy (task: unified) needs the world model in the loop, \
+             which `play` does not run yet; `eval` does",
+            ck.path.display()
+        ))
+        .into());
+    }
     let [lo, hi] = cfg.eval.lin_vel_x;
     let speed = o.speed.unwrap_or(0.5 * (lo + hi));
     let env_cfg = play_env_config(&cfg, o, speed);

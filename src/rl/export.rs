@@ -37,6 +37,14 @@ fn normalize(x: &Tensor, mean: &Tensor, std: &Tensor, clip: f64, on: bool) -> Te
 /// normalizers loaded: what both exports read.
 fn checkpoint_agent(ck: &Checkpoint) -> Result<(ExperimentConfig, Agent), RlError> {
     let cfg = ck.config()?;
+    if cfg.task == crate::rl::config::TaskKind::Unified {
+        return Err(RlError::Invalid(format!(
+            "{}: a unified policy (task: unified) reads the world model's plan where a \
+             specialist reads scandots; its export (the policy with the world model's \
+             denoiser) is not built yet. `eval` runs it with the world model",
+            ck.path.display()
+        )));
+    }
     let mut agent = Agent::new(&cfg.policy, ck.meta.dims, 1, cfg.ppo.normalize_obs);
     ck.load_agent(&mut agent)?;
     Ok((cfg, agent))

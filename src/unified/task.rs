@@ -94,6 +94,10 @@ pub struct UnifiedTask {
 impl UnifiedTask {
     /// The env of `cfg.env` with the world model of `cfg.unified` (`task: unified`).
     pub fn new(cfg: &ExperimentConfig) -> Result<UnifiedTask, RlError> {
+        Self::build(cfg, None)
+    }
+
+    fn build(cfg: &ExperimentConfig, env: Option<VecEnv>) -> Result<UnifiedTask, RlError> {
         let u = UnifiedConfig::of(cfg)?;
         let wm = WorldModel::load(Path::new(&u.world_model), Device::Cpu)
             .map_err(|e| RlError::Invalid(format!("unified.world_model: {e}")))?;
@@ -111,7 +115,10 @@ impl UnifiedTask {
                 "unified.future_states {future} is more than the world model's horizon {h}"
             )));
         }
-        let env = VecEnv::new(&cfg.env)?;
+        let env = match env {
+            Some(env) => env,
+            None => VecEnv::new(&cfg.env)?,
+        };
         let n = env.n_envs();
         let model = env.envs()[0].data().model().clone();
         let fk = BodyFk::new(model, &cfg.env.observation.scales)
@@ -142,9 +149,26 @@ impl UnifiedTask {
         Ok(t)
     }
 
+    /// The unified task around `env` (an evaluation lane's), with the world
+    /// model and discriminator of `cfg.unified`.
+    pub fn with_env(cfg: &ExperimentConfig, env: VecEnv) -> Result<UnifiedTask, RlError> {
+        Self::build(cfg, Some(env))
+    }
+
     /// The env underneath.
     pub fn env(&self) -> &VecEnv {
         &self.env
+    }
+
+    /// Start env `i` on a new episode (evaluation, after it reached its goal):
+    /// its history restarts from the new `s_0` and it gets a new plan now.
+    pub fn reset_env(&mut self, i: usize) {
+        self.env.reset_env(i);
+        let obs = &self.env.obs[i * OBS_DIM..(i + 1) * OBS_DIM];
+        self.history.reset(i, obs);
+        self.plan.invalidate(i);
+        self.replan();
+        self.write_scan();
     }
 
     /// The world model's `K`.
