@@ -352,24 +352,7 @@ fn walker_transfers_into_a_scan_encoder_policy_acting_the_same() {
     assert_eq!(t.widened, ["actor.0.weight", "critic.0.weight"]);
     assert_eq!(t.fresh.len(), 8, "{t}");
     assert!(new.policy.uses_scan() && !old.policy.uses_scan());
-    for a in [&mut old, &mut new] {
-        a.set_frozen(true);
-        a.reset_history(&env);
-    }
-    for _ in 0..3 {
-        old.prepare(&env);
-        new.prepare(&env);
-        let (a, b) = (old.act_mean(), new.act_mean());
-        let max = a
-            .iter()
-            .zip(&b)
-            .map(|(x, y)| (x - y).abs())
-            .fold(0.0, f32::max);
-        assert!(max < 1e-6, "actions differ by {max}");
-        env.step(&a);
-        old.after_step(&env);
-        new.after_step(&env);
-    }
+    common::assert_acts_alike(&mut old, &mut new, &mut env, 3);
 
     // a training run starts from it and says so
     let run = dir.0.join("specialist");

@@ -344,24 +344,7 @@ fn the_foundation_transfers_into_the_unified_policy_acting_the_same() {
     let mut new = Agent::new(&cfg.policy, task.dims(), n, true);
     let t = ck.transfer_agent(&mut new).unwrap();
     assert_eq!(t.widened, ["actor.0.weight", "critic.0.weight"]);
-    for a in [&mut old, &mut new] {
-        a.set_frozen(true);
-        a.reset_history(&task);
-    }
-    for _ in 0..6 {
-        old.prepare(&task);
-        new.prepare(&task);
-        let (a, b) = (old.act_mean(), new.act_mean());
-        let max = a
-            .iter()
-            .zip(&b)
-            .map(|(x, y)| (x - y).abs())
-            .fold(0.0, f32::max);
-        assert!(max < 1e-6, "actions differ by {max}");
-        task.step(&a);
-        old.after_step(&task);
-        new.after_step(&task);
-    }
+    common::assert_acts_alike(&mut old, &mut new, &mut task, 6);
     // the plans are fed: finite, and not all the same
     let s = task.scan();
     assert!(s.iter().all(|v| v.is_finite()));

@@ -103,3 +103,31 @@ pub fn run_ok(cmd: &mut std::process::Command) -> String {
     );
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
+
+/// Step `task` `steps` times with `old`'s deterministic actions, checking at
+/// each step that `new` (a transferred policy) acts the same to 1e-6.
+pub fn assert_acts_alike(
+    old: &mut dreampolicy::rl::Agent,
+    new: &mut dreampolicy::rl::Agent,
+    task: &mut dyn dreampolicy::rl::VecTask,
+    steps: usize,
+) {
+    for a in [&mut *old, &mut *new] {
+        a.set_frozen(true);
+        a.reset_history(&*task);
+    }
+    for _ in 0..steps {
+        old.prepare(&*task);
+        new.prepare(&*task);
+        let (a, b) = (old.act_mean(), new.act_mean());
+        let max = a
+            .iter()
+            .zip(&b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f32::max);
+        assert!(max < 1e-6, "actions differ by {max}");
+        task.step(&a);
+        old.after_step(&*task);
+        new.after_step(&*task);
+    }
+}
