@@ -57,8 +57,6 @@ fn train_unified(args: TrainArgs) -> Result<()> {
         &["env.threads", "train.torch_threads"],
         dreampolicy::rl::config::load,
     )?;
-    // the section is checked before a run directory is made
-    dreampolicy::unified::config::UnifiedConfig::of(&cfg)?;
     let s = dreampolicy::unified::train(&cfg, &run_path, args.resume.is_some(), args.quiet)
         .with_context(|| format!("training the unified policy in {}", run_path.display()))?;
     println!("{}", serde_json::to_string(&s)?);
