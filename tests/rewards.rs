@@ -124,6 +124,47 @@ fn specialist_terms_by_hand() {
     close(term("dof_pos_limits", &s), 0.05);
 }
 
+/// The unified policy's energy, safety-limit and feet-slide terms (the paper's
+/// unified reward table).
+#[test]
+fn unified_table_terms_by_hand() {
+    let mut s = state();
+    // no limits known: the limit terms have nothing to measure
+    s.qd[0] = 50.0;
+    s.torque[0] = 100.0;
+    close(term("energy", &s), 0.0);
+    close(term("dof_vel_limits", &s), 0.0);
+    close(term("torque_limits", &s), 0.0);
+    s.qd_limit = [10.0; NUM_JOINTS];
+    s.tau_limit = [50.0; NUM_JOINTS];
+    s.qd = [0.0; NUM_JOINTS];
+    s.torque = [0.0; NUM_JOINTS];
+    // joint 0: 12 rad/s against 0.9 x 10; joint 1: 8 rad/s, within
+    s.qd[0] = 12.0;
+    s.qd[1] = -8.0;
+    close(term("dof_vel_limits", &s), 3.0);
+    // joint 2: 45 N m against 0.8 x 50; joint 3: -30 N m, within
+    s.torque[2] = 45.0;
+    s.torque[3] = -30.0;
+    close(term("torque_limits", &s), 25.0);
+    // power over the effort limit, squared: joints 0-3 move and push
+    s.torque[0] = 10.0;
+    s.torque[1] = 5.0;
+    s.qd[2] = 2.0;
+    s.qd[3] = 1.0;
+    let want = (10.0f64 * 12.0 / 50.0).powi(2)
+        + (5.0f64 * -8.0 / 50.0).powi(2)
+        + (45.0f64 * 2.0 / 50.0).powi(2)
+        + (-30.0f64 * 1.0 / 50.0).powi(2);
+    close(term("energy", &s), want);
+    // feet slide: the planar speed of a foot in contact, not squared, z left out
+    s.feet_vel = [[0.3, 0.4, 2.0], [1.0, 0.0, 0.0]];
+    s.feet_contact = [true, false];
+    close(term("feet_slide", &s), 0.5);
+    s.feet_contact = [true, true];
+    close(term("feet_slide", &s), 1.5);
+}
+
 #[test]
 fn weighted_sum_uses_dt_and_keeps_episode_sums() {
     let mut terms = BTreeMap::new();

@@ -95,7 +95,11 @@ impl LocoEnv {
             data,
             bucket,
             rng,
-            state: EnvState::new(sh.dt, g1.default_pos, g1.joint_range),
+            state: EnvState {
+                qd_limit: g1.velocity_limit,
+                tau_limit: g1.effort_limit,
+                ..EnvState::new(sh.dt, g1.default_pos, g1.joint_range)
+            },
             step_in_episode: 0,
             actions: [[0.0; NUM_JOINTS]; MAX_LATENCY + 1],
             latency: 0,

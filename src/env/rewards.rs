@@ -12,7 +12,9 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 
 use crate::config::ConfigError;
-use crate::robot::{HIP_ROLL_YAW, LEG_ANKLE_PITCH, LEG_HIP_PITCH, LEG_KNEE, UPPER_BODY};
+use crate::robot::{
+    HIP_ROLL_YAW, LEG_ANKLE_PITCH, LEG_HIP_PITCH, LEG_KNEE, NUM_JOINTS, UPPER_BODY,
+};
 
 /// One reward term.
 pub struct Term {
@@ -70,6 +72,10 @@ terms! {
     foot_clearance: "exp(-sum_feet tanh(2 |v_xy(foot)|) (z_foot - ground - foot_clearance_target)^2 / clearance_sigma): only a foot that moves is asked to be high (Isaac Lab's velocity-weighted clearance)";
     ref_joint_pos: "exp(-2 d) - 0.2 min(d, 0.5), d = ||q_legs - q_ref|| over the 12 leg joints; q_ref is the default pose plus, in each leg's clock swing, hip pitch -A sin(pi s), knee +2A sin(pi s), ankle pitch -A sin(pi s) (A = ref_swing_amplitude: the foot lifts and stays level; humanoid-gym's reference trajectory)";
     stand_still: "1 while a planar command of |v_cmd| > 0.2 m/s is given and the base moves along it at less than a quarter of it: standing in front of an obstacle must not pay";
+    energy: "sum((tau_j qd_j / k_j)^2), k_j the joint's effort limit (the paper's energy consumption; its k_j is read as the effort limit, 0 without one)";
+    dof_vel_limits: "sum(max(0, |qd_j| - 0.9 qd_max_j)), qd_max_j the motor's no-load speed (Unitree's specs)";
+    torque_limits: "sum(max(0, |tau_j| - 0.8 tau_max_j)^2), tau_max_j the actuator's force range";
+    feet_slide: "sum over feet in contact of |v_xy(foot)| (the paper's feet slide: the planar speed, not squared)";
     feet_swing_clock: "sum over legs in the gait clock's swing phase of (z_foot - ground - ankle_stance_height - swing_clock_height sin(pi s))^2, s in [0, 1] the swing's progress (walk-these-ways' clock target: a foot kept down in swing pays)";
 }
 
@@ -325,6 +331,34 @@ fn contact_no_vel(s: &EnvState, _: &RewardParams) -> f64 {
     (0..2)
         .filter(|&k| s.feet_contact[k])
         .map(|k| s.feet_vel[k].iter().map(|v| sq(*v)).sum::<f64>())
+        .sum()
+}
+
+fn energy(s: &EnvState, _: &RewardParams) -> f64 {
+    (0..NUM_JOINTS)
+        .filter(|&j| s.tau_limit[j] > 0.0)
+        .map(|j| sq(s.torque[j] * s.qd[j] / s.tau_limit[j]))
+        .sum()
+}
+
+fn dof_vel_limits(s: &EnvState, _: &RewardParams) -> f64 {
+    (0..NUM_JOINTS)
+        .filter(|&j| s.qd_limit[j] > 0.0)
+        .map(|j| (s.qd[j].abs() - 0.9 * s.qd_limit[j]).max(0.0))
+        .sum()
+}
+
+fn torque_limits(s: &EnvState, _: &RewardParams) -> f64 {
+    (0..NUM_JOINTS)
+        .filter(|&j| s.tau_limit[j] > 0.0)
+        .map(|j| sq((s.torque[j].abs() - 0.8 * s.tau_limit[j]).max(0.0)))
+        .sum()
+}
+
+fn feet_slide(s: &EnvState, _: &RewardParams) -> f64 {
+    (0..2)
+        .filter(|&k| s.feet_contact[k])
+        .map(|k| s.feet_vel[k][0].hypot(s.feet_vel[k][1]))
         .sum()
 }
 

@@ -24,6 +24,10 @@ pub struct EnvState {
     pub q: [f64; NUM_JOINTS],
     pub default_q: [f64; NUM_JOINTS],
     pub q_range: [[f64; 2]; NUM_JOINTS],
+    /// Joint speed limits (rad/s) and effort limits (N m); 0 = none (the
+    /// limit terms skip the joint).
+    pub qd_limit: [f64; NUM_JOINTS],
+    pub tau_limit: [f64; NUM_JOINTS],
     pub qd: [f64; NUM_JOINTS],
     pub last_qd: [f64; NUM_JOINTS],
     pub torque: [f64; NUM_JOINTS],
