@@ -14,6 +14,15 @@ use dreampolicy::unified::plan::{History, Plan};
 use dreampolicy::unified::track::{TrackingErrors, TrackingSigmas};
 use rand::{Rng, SeedableRng};
 
+/// libtorch's random generator is one per process: tests that seed it and
+/// draw from it (network initialization, sampling) take turns, or a
+/// bit-identical comparison sees another test's draws.
+static TORCH: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn torch_lock() -> std::sync::MutexGuard<'static, ()> {
+    TORCH.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 fn max_diff(a: &BodyFrames, b: &BodyFrames) -> f64 {
     let mut m = 0.0f64;
     for k in 0..N_TRACKED {
@@ -138,6 +147,7 @@ fn each_tracking_term_by_hand() {
 /// few hundred updates, and the style reward favours the real one.
 #[test]
 fn the_discriminator_separates_two_distributions() {
+    let _t = torch_lock();
     tch::manual_seed(0);
     let cfg = AmpConfig {
         hidden: vec![64, 64],
@@ -225,6 +235,7 @@ fn history_padding_and_plan_shifting_across_resets() {
 /// discriminator's loss included), the same discriminator weights and moments.
 #[test]
 fn a_resumed_tiny_unified_run_is_bit_identical() {
+    let _t = torch_lock();
     use dreampolicy::rl::checkpoint::Checkpoint;
     use dreampolicy::run::latest_checkpoint;
     let cfg = common::load_config("test/unified_tiny.yaml", &[]);
@@ -308,12 +319,185 @@ fn a_resumed_tiny_unified_run_is_bit_identical() {
         assert_eq!(r.episodes, 2);
         assert!((0.0..=1.0).contains(&r.completion_rate), "{r:?}");
     }
-    // export does not write a bundle that would call the plan scandots
-    let e = dreampolicy::rl::export::export(&ca, &a.0.join("p.pt"))
-        .err()
+    exported_bundle_runs_the_inference_loop(&ca, &a.0.join("bundle"));
+    // and `play` draws the plan beside the robot
+    let mcap = a.0.join("play.mcap");
+    let mut o = dreampolicy::play::PlayOptions::new(TerrainKind::Stair, &mcap);
+    o.seconds = 0.5;
+    o.level = Some(0);
+    let s = dreampolicy::play::play(&ca, &o).unwrap();
+    let bytes = std::fs::read(&mcap).unwrap();
+    let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+    let plan_channel = summary
+        .channels
+        .values()
+        .find(|c| c.topic == "/plan")
+        .expect("a /plan channel")
+        .id;
+    let stats = summary.stats.unwrap();
+    assert_eq!(stats.channel_message_counts[&plan_channel], s.frames);
+    let first = mcap::MessageStream::new(&bytes)
         .unwrap()
-        .to_string();
-    assert!(e.contains("unified") && e.contains("not built yet"), "{e}");
+        .map(|m| m.unwrap())
+        .find(|m| m.channel.topic == "/plan")
+        .unwrap();
+    let v: serde_json::Value = serde_json::from_slice(&first.data).unwrap();
+    let spheres = v["entities"][0]["spheres"].as_array().unwrap();
+    // a pelvis and two feet for each of the world model's H predicted states
+    assert_eq!(spheres.len(), 3 * 8);
+    let z = |i: usize| spheres[i]["pose"]["position"]["z"].as_f64().unwrap();
+    assert!(
+        z(0) > 0.5 && z(1) < 0.3 && z(2) < 0.3,
+        "pelvis {} feet {} {}",
+        z(0),
+        z(1),
+        z(2)
+    );
+}
+
+/// The unified bundle of `ck` in `dir`: `policy.pt` acts as the checkpoint's
+/// agent on the unified task's inputs, and the sampling loop `unified.json`
+/// describes, run with `denoiser.pt`, gives the world model's own plan for the
+/// same noise.
+fn exported_bundle_runs_the_inference_loop(
+    ck: &dreampolicy::rl::checkpoint::Checkpoint,
+    dir: &std::path::Path,
+) {
+    use dreampolicy::rl::{Agent, VecTask};
+    use dreampolicy::world_model::sampler::Noise;
+    use tch::Tensor;
+    let info = dreampolicy::unified::export::write_bundle(ck, dir).unwrap();
+    assert_eq!(
+        (info.history_len, info.plan_states, info.replan_every),
+        (3, 4, 3)
+    );
+    let text = std::fs::read_to_string(dir.join("unified.json")).unwrap();
+    dreampolicy::seal::check_json(&text).unwrap();
+    let spec: serde_json::Value = serde_json::from_str(&text).unwrap();
+    for f in ["policy", "world_model"] {
+        let file = dir.join(spec[f]["file"].as_str().unwrap());
+        assert_eq!(
+            spec[f]["sha256"].as_str().unwrap(),
+            dreampolicy::seal::file_sha256(&file).unwrap()
+        );
+    }
+
+    // the policy: the agent's mean actions on the task's obs, history and plan
+    let cfg = ck.config().unwrap();
+    let mut task = dreampolicy::unified::task::UnifiedTask::new(&cfg).unwrap();
+    let n = task.n_envs();
+    let d = task.dims();
+    let mut agent = Agent::new(&cfg.policy, d, n, cfg.ppo.normalize_obs);
+    ck.load_agent(&mut agent).unwrap();
+    agent.set_frozen(true);
+    agent.reset_history(&task);
+    let policy = tch::CModule::load(dir.join("policy.pt")).unwrap();
+    for _ in 0..4 {
+        agent.prepare(&task);
+        let ours = agent.act_mean();
+        let obs = Tensor::from_slice(task.obs()).view([n as i64, d.obs as i64]);
+        let hist = Tensor::from_slice(agent.history()).view([n as i64, 3, d.obs as i64]);
+        let plan = Tensor::from_slice(VecTask::scan(&task)).view([n as i64, d.scan as i64]);
+        let theirs = policy.forward_ts(&[obs, hist, plan]).unwrap();
+        let theirs = Vec::<f32>::try_from(theirs.contiguous().view([-1])).unwrap();
+        let worst = common::max_abs_diff(&ours, &theirs);
+        assert!(worst < 1e-4, "policy.pt differs from the agent by {worst}");
+        let actions = ours.clone();
+        task.step(&actions);
+        agent.after_step(&task);
+    }
+
+    // the world model: unified.json's loop with denoiser.pt = WorldModel::predict
+    let u = dreampolicy::unified::config::UnifiedConfig::of(&cfg).unwrap();
+    let mut wm = dreampolicy::world_model::WorldModel::load(
+        std::path::Path::new(&u.world_model),
+        tch::Device::Cpu,
+    )
+    .unwrap();
+    let (k, h) = (wm.history() as i64, wm.horizon() as i64);
+    let (b, sd) = (3i64, OBS_DIM as i64);
+    let hist = Tensor::from_slice(&task.env().obs[..OBS_DIM])
+        .view([1, 1, sd])
+        .repeat([b, k, 1])
+        + Tensor::randn([b, k, sd], tch::kind::FLOAT_CPU) * 0.05;
+    let scan = Tensor::from_slice(&task.env().scan[..3 * dreampolicy::env::obs::SCAN_DIM])
+        .view([b, dreampolicy::env::obs::SCAN_DIM as i64]);
+    let want = wm
+        .predict(&hist, &scan, &u.sampling, &mut Noise::new(11))
+        .unwrap();
+    let denoiser = tch::CModule::load(dir.join("denoiser.pt")).unwrap();
+    let ab: Vec<f64> = spec["sampler"]["alpha_bar"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let steps: Vec<usize> = spec["sampler"]["steps"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap() as usize)
+        .collect();
+    assert_eq!(spec["sampler"]["kind"], "ddim");
+    let stat = |key: &str| {
+        let v: Vec<f32> = spec["world_model"][key]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap() as f32)
+            .collect();
+        Tensor::from_slice(&v)
+    };
+    let mut x = Noise::new(11).randn(&[b, h, sd], tch::Device::Cpu);
+    for (i, &s) in steps.iter().enumerate() {
+        let nt = Tensor::from_slice(&vec![s as f32; b as usize]);
+        let x0 = denoiser.forward_ts(&[&x, &hist, &nt, &scan]).unwrap();
+        match steps.get(i + 1) {
+            None => x = x0,
+            Some(&m) => {
+                let eps = (&x - &x0 * ab[s].sqrt()) / (1.0 - ab[s]).sqrt();
+                x = x0 * ab[m].sqrt() + eps * (1.0 - ab[m]).sqrt();
+            }
+        }
+    }
+    let got = x * stat("state_std") + stat("state_mean");
+    let worst = (got - &want).abs().max().double_value(&[]);
+    assert!(
+        worst < 1e-3,
+        "the bundle's loop differs from the world model by {worst}"
+    );
+
+    // guidance other than 1 (both passes inside the traced graph), any batch
+    for omega in [0.0, 5.0] {
+        let f = dir.join(format!("denoiser_{omega}.pt"));
+        dreampolicy::unified::export::trace_denoiser(&mut wm, omega, &f).unwrap();
+        let m = tch::CModule::load(&f).unwrap();
+        for rows in [1i64, 3] {
+            let (hi, sc) = (hist.narrow(0, 0, rows), scan.narrow(0, 0, rows));
+            let xn = Tensor::randn([rows, h, sd], tch::kind::FLOAT_CPU);
+            let theirs = m
+                .forward_ts(&[
+                    &xn,
+                    &hi,
+                    &Tensor::from_slice(&vec![7.0f32; rows as usize]),
+                    &sc,
+                ])
+                .unwrap();
+            let ours = tch::no_grad(|| {
+                let y = wm.net.terrain_embedding(&wm.norm.scans(&sc));
+                dreampolicy::world_model::sampler::guided_x0(
+                    &wm.net,
+                    &xn,
+                    &wm.norm.states(&hi),
+                    7,
+                    &y,
+                    omega,
+                )
+            });
+            let worst = (theirs - ours).abs().max().double_value(&[]);
+            assert!(worst < 1e-4, "omega {omega}, batch {rows}: {worst}");
+        }
+    }
 }
 
 /// The small config's start: foundation_sym transferred into the unified
@@ -322,6 +506,7 @@ fn a_resumed_tiny_unified_run_is_bit_identical() {
 /// so iteration 0 walks as the foundation does.
 #[test]
 fn the_foundation_transfers_into_the_unified_policy_acting_the_same() {
+    let _t = torch_lock();
     use dreampolicy::rl::checkpoint::Checkpoint;
     use dreampolicy::rl::{Agent, VecTask};
     use dreampolicy::unified::task::UnifiedTask;

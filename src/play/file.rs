@@ -29,9 +29,12 @@ pub enum Topic {
     Command,
     State,
     Reward,
+    /// A unified policy's plan (its files only).
+    Plan,
 }
 
 impl Topic {
+    /// The topics of every play file; a unified policy's also has [`Topic::Plan`].
     pub const ALL: [Topic; 6] = [
         Topic::Tf,
         Topic::Robot,
@@ -49,6 +52,7 @@ impl Topic {
             Topic::Command => "/command",
             Topic::State => "/state",
             Topic::Reward => "/reward",
+            Topic::Plan => "/plan",
         }
     }
 
@@ -56,7 +60,7 @@ impl Topic {
     pub const fn schema_name(self) -> &'static str {
         match self {
             Topic::Tf => foxglove::FRAME_TRANSFORMS,
-            Topic::Robot | Topic::Terrain => foxglove::SCENE_UPDATE,
+            Topic::Robot | Topic::Terrain | Topic::Plan => foxglove::SCENE_UPDATE,
             Topic::Command => "dreampolicy.Command",
             Topic::State => "dreampolicy.State",
             Topic::Reward => "dreampolicy.Reward",
@@ -120,18 +124,20 @@ pub struct PlayFile {
     tmp: PathBuf,
     path: PathBuf,
     writer: Option<Writer<BufWriter<File>>>,
-    channels: [u16; 6],
-    counts: [u64; 6],
+    channels: [u16; 7],
+    counts: [u64; 7],
     buf: Vec<u8>,
 }
 
 impl PlayFile {
     /// Start `<path>.tmp` (parent directories are created) with its metadata
-    /// record and every channel; `reward_terms` names the `/reward` terms.
+    /// record and every channel; `reward_terms` names the `/reward` terms;
+    /// `plan` adds the `/plan` channel.
     pub fn create(
         path: &Path,
         metadata: BTreeMap<String, String>,
         reward_terms: &[&str],
+        plan: bool,
     ) -> Result<PlayFile, PlayError> {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir).map_err(|e| PlayError::io(dir, e))?;
@@ -144,8 +150,8 @@ impl PlayFile {
             tmp,
             path: path.to_path_buf(),
             writer: None,
-            channels: [0; 6],
-            counts: [0; 6],
+            channels: [0; 7],
+            counts: [0; 7],
             buf: Vec::with_capacity(1 << 16),
         };
         let mcap_err = f.mcap_err();
@@ -162,10 +168,12 @@ impl PlayFile {
             metadata,
         })
         .map_err(&mcap_err)?;
-        for (k, topic) in Topic::ALL.into_iter().enumerate() {
+        let extra = plan.then_some(Topic::Plan);
+        for topic in Topic::ALL.into_iter().chain(extra) {
+            let k = topic as usize;
             let schema = match topic {
                 Topic::Tf => foxglove::frame_transforms_schema(),
-                Topic::Robot | Topic::Terrain => foxglove::scene_update_schema(),
+                Topic::Robot | Topic::Terrain | Topic::Plan => foxglove::scene_update_schema(),
                 Topic::Command => foxglove::plain_schema(
                     topic.schema_name(),
                     "The command the policy follows: [vx, vy, yaw_rate]",
@@ -185,7 +193,7 @@ impl PlayFile {
                     Some(reward_terms),
                 ),
             };
-            // identical schema texts (the two SceneUpdate topics) share one record
+            // identical schema texts (the SceneUpdate topics) share one record
             let schema_id = w
                 .add_schema(topic.schema_name(), SCHEMA_ENCODING, &schema)
                 .map_err(&mcap_err)?;

@@ -14,7 +14,10 @@
 //! Topics, all JSON with a JSON Schema ([`file::Topic`]): `/tf`
 //! (`foxglove.FrameTransforms`, every body in `world` at every frame), `/robot`
 //! and `/terrain` (`foxglove.SceneUpdate`, once, at the first frame), `/command`,
-//! `/state` (every frame) and `/reward` (every control step, with its terms).
+//! `/state` (every frame) and `/reward` (every control step, with its terms);
+//! a unified policy's file adds `/plan` (`foxglove.SceneUpdate`, every frame:
+//! the world model's plan, a sphere for the pelvis and each foot of every
+//! predicted state, placed as [`crate::unified::task::UnifiedTask::plan_in_world`] says).
 //! Frame `k` is the state after `k` control steps (frame 0: the reset state),
 //! stamped [`START_NS`] + `k` x the control period. A step that ends the
 //! episode writes no frame: the env has already reset its robot.
@@ -32,7 +35,7 @@ use crate::env::config::{CollisionMode, EnvConfig, Integrator, SimConfig, Terrai
 use crate::env::{EnvError, Scene, VecEnv};
 use crate::rl::checkpoint::Checkpoint;
 use crate::rl::config::ExperimentConfig;
-use crate::rl::{Agent, RlError, VecTask};
+use crate::rl::{Agent, RlError};
 use crate::terrain::{TerrainError, TerrainKind};
 use file::{PlayFile, Topic};
 use foxglove::{FrameTransform, FrameTransforms, Quaternion, SceneUpdate, Time, Vector3};
@@ -213,18 +216,30 @@ fn check(o: &PlayOptions) -> Result<(), PlayError> {
     Ok(())
 }
 
-/// Roll the checkpoint's policy out on one lane and write `o.out`.
+/// What `play` steps: the G1 env, or a unified policy's task around it, whose
+/// plan is drawn on `/plan`.
+trait PlayTask: crate::eval::EvalTask {
+    /// Env 0's plan in the world (a unified policy's), if it has one now.
+    fn plan_poses(&mut self) -> Option<Vec<crate::unified::task::PlannedPose>> {
+        None
+    }
+}
+
+impl PlayTask for VecEnv {}
+
+impl PlayTask for crate::unified::task::UnifiedTask {
+    fn plan_poses(&mut self) -> Option<Vec<crate::unified::task::PlannedPose>> {
+        self.plan_in_world(0)
+    }
+}
+
+/// Roll the checkpoint's policy out on one lane and write `o.out`. A unified
+/// policy runs the paper's inference loop (the world model named in its
+/// config plans from the robot's history and the lane's scandots) and its
+/// plan goes to `/plan`.
 pub fn play(ck: &Checkpoint, o: &PlayOptions) -> Result<PlaySummary, PlayError> {
     check(o)?;
     let cfg = ck.config()?;
-    if cfg.task == crate::rl::config::TaskKind::Unified {
-        return Err(RlError::Invalid(format!(
-            "{}: a unified policy (task: unified) needs the world model in the loop, \
-             which `play` does not run yet; `eval` does",
-            ck.path.display()
-        ))
-        .into());
-    }
     let [lo, hi] = cfg.eval.lin_vel_x;
     let speed = o.speed.unwrap_or(0.5 * (lo + hi));
     let env_cfg = play_env_config(&cfg, o, speed);
@@ -236,132 +251,214 @@ pub fn play(ck: &Checkpoint, o: &PlayOptions) -> Result<PlaySummary, PlayError> 
     let scene = Scene::with_terrain(&env_cfg, lane.as_ref().map(|l| Arc::new(l.map().clone())))?;
     let mut env = VecEnv::with_scene(&env_cfg, scene)?;
     env.set_penalty_scale(ck.meta.penalty_scale);
-    let mut agent = Agent::new(&cfg.policy, env.dims(), 1, cfg.ppo.normalize_obs);
-    ck.load_agent(&mut agent)?;
-    agent.set_frozen(true);
-    agent.reset_history(&env);
-
-    let model = env.envs()[0].data().model().clone();
-    let frames = scene::body_frames(&model);
-    let term_names = env.shared().rewards.names();
-    let metadata = BTreeMap::from([
-        ("checkpoint".into(), ck.path.display().to_string()),
-        ("checkpoint_iteration".into(), ck.meta.iteration.to_string()),
-        ("terrain".into(), o.terrain.name().to_string()),
-        (
-            "level".into(),
-            lane.as_ref().map_or("plane".into(), |_| level.to_string()),
-        ),
-        ("commanded_speed".into(), speed.to_string()),
-        ("seconds".into(), o.seconds.to_string()),
-        ("seed".into(), o.seed.to_string()),
-        ("full_collision".into(), o.full_collision.to_string()),
-        ("start_ns".into(), START_NS.to_string()),
-        ("control_dt".into(), env.shared().dt.to_string()),
-        ("mujoco_version".into(), crate::sim::mujoco_version()),
-        (
-            "writer".into(),
-            format!("dreampolicy {}", env!("CARGO_PKG_VERSION")),
-        ),
-    ]);
-    let mut file = PlayFile::create(&o.out, metadata, &term_names)?;
-
-    // the scene, once, at frame 0
-    let t0 = Time::from_nanos(START_NS);
-    let robot = SceneUpdate {
-        deletions: Vec::new(),
-        entities: scene::robot_entities(&model, t0),
+    let run = Rollout {
+        ck,
+        cfg: &cfg,
+        o,
+        lane: lane.as_ref(),
+        level,
+        speed,
     };
-    file.write(Topic::Robot, START_NS, &robot)?;
-    let spawn = env.envs()[0].spawn();
-    let ground = match &lane {
-        Some(l) => scene::lane_entity(l.map(), 1.0, t0),
-        None => {
-            let reach = speed * o.seconds;
-            scene::plane_entity([reach.min(0.0) - 5.0, reach.max(0.0) + 5.0], t0)
+    if cfg.task == crate::rl::config::TaskKind::Unified {
+        let mut task = crate::unified::task::UnifiedTask::with_env(&cfg, env)?;
+        run.go(&mut task)
+    } else {
+        run.go(&mut env)
+    }
+}
+
+/// One `play` rollout's fixed inputs.
+struct Rollout<'a> {
+    ck: &'a Checkpoint,
+    cfg: &'a ExperimentConfig,
+    o: &'a PlayOptions,
+    lane: Option<&'a crate::terrain::Lane>,
+    level: usize,
+    speed: f64,
+}
+
+impl Rollout<'_> {
+    fn go<T: PlayTask>(&self, task: &mut T) -> Result<PlaySummary, PlayError> {
+        let Rollout {
+            ck,
+            cfg,
+            o,
+            lane,
+            level,
+            speed,
+        } = *self;
+        let mut agent = Agent::new(&cfg.policy, task.dims(), 1, cfg.ppo.normalize_obs);
+        ck.load_agent(&mut agent)?;
+        agent.set_frozen(true);
+        agent.reset_history(&*task);
+
+        let model = task.loco().envs()[0].data().model().clone();
+        let frames = scene::body_frames(&model);
+        let term_names = task.loco().shared().rewards.names();
+        let dt = task.loco().shared().dt;
+        let mut metadata = BTreeMap::from([
+            ("checkpoint".into(), ck.path.display().to_string()),
+            ("checkpoint_iteration".into(), ck.meta.iteration.to_string()),
+            ("terrain".into(), o.terrain.name().to_string()),
+            (
+                "level".into(),
+                lane.map_or("plane".into(), |_| level.to_string()),
+            ),
+            ("commanded_speed".into(), speed.to_string()),
+            ("seconds".into(), o.seconds.to_string()),
+            ("seed".into(), o.seed.to_string()),
+            ("full_collision".into(), o.full_collision.to_string()),
+            ("start_ns".into(), START_NS.to_string()),
+            ("control_dt".into(), dt.to_string()),
+            ("mujoco_version".into(), crate::sim::mujoco_version()),
+            (
+                "writer".into(),
+                format!("dreampolicy {}", env!("CARGO_PKG_VERSION")),
+            ),
+        ]);
+        let unified = cfg.task == crate::rl::config::TaskKind::Unified;
+        if unified {
+            let u = crate::unified::config::UnifiedConfig::of(cfg).map_err(RlError::from)?;
+            metadata.insert("world_model".into(), u.world_model.clone());
         }
-    };
-    file.write(
-        Topic::Terrain,
-        START_NS,
-        &SceneUpdate {
+        let mut file = PlayFile::create(&o.out, metadata, &term_names, unified)?;
+
+        // the scene, once, at frame 0
+        let t0 = Time::from_nanos(START_NS);
+        let robot = SceneUpdate {
             deletions: Vec::new(),
-            entities: vec![ground],
-        },
-    )?;
-
-    let dt = env.shared().dt;
-    let dt_ns = (dt * 1e9).round() as u64;
-    let max_steps = ((o.seconds / dt).round() as u64).max(1);
-    let mut prev_sums = env.envs()[0].episode_sums.clone();
-    let mut terms = BTreeMap::new();
-    let (mut ret, mut speed_sum, mut ending, mut steps) = (0.0, 0.0, Ending::TimeUp, 0);
-    let weight = env.shared().scene.robot_weight;
-    let mut distance = write_frame(&mut file, &env, &frames, 0, dt, weight, spawn)?;
-    for k in 1..=max_steps {
-        agent.step_mean(&mut env);
-        steps = k;
-        let out = env.outcomes[0];
-        let e = &env.envs()[0];
-        if out.episode_done {
-            ending = if out.blowup {
-                Ending::BlowUp
-            } else if out.terminated {
-                Ending::Fell
-            } else {
-                Ending::LeftMap
-            };
-            let end = e.last_episode_end();
-            distance = end.base_pos[0] - end.spawn[0];
-            ret += out.reward as f64;
-            break;
-        }
-        ret += out.reward as f64;
-        speed_sum += e.state().base_lin_vel_world[0];
-        for ((name, now), before) in term_names.iter().zip(&e.episode_sums).zip(&prev_sums) {
-            terms.insert(*name, round6(now - before));
-        }
-        prev_sums.copy_from_slice(&e.episode_sums);
-        let t = START_NS + k * dt_ns;
+            entities: scene::robot_entities(&model, t0),
+        };
+        file.write(Topic::Robot, START_NS, &robot)?;
+        let spawn = task.loco().envs()[0].spawn();
+        let ground = match lane {
+            Some(l) => scene::lane_entity(l.map(), 1.0, t0),
+            None => {
+                let reach = speed * o.seconds;
+                scene::plane_entity([reach.min(0.0) - 5.0, reach.max(0.0) + 5.0], t0)
+            }
+        };
         file.write(
-            Topic::Reward,
-            t,
-            &RewardMsg {
-                step: k,
-                total: round6(out.reward as f64),
-                r#return: round6(ret),
-                terms: &terms,
+            Topic::Terrain,
+            START_NS,
+            &SceneUpdate {
+                deletions: Vec::new(),
+                entities: vec![ground],
             },
         )?;
-        distance = write_frame(&mut file, &env, &frames, k, dt, weight, spawn)?;
+
+        let dt_ns = (dt * 1e9).round() as u64;
+        let max_steps = ((o.seconds / dt).round() as u64).max(1);
+        let mut prev_sums = task.loco().envs()[0].episode_sums.clone();
+        let mut terms = BTreeMap::new();
+        let (mut ret, mut speed_sum, mut ending, mut steps) = (0.0, 0.0, Ending::TimeUp, 0);
+        let weight = task.loco().shared().scene.robot_weight;
+        let mut distance = write_frame(&mut file, task.loco(), &frames, 0, dt, weight, spawn)?;
+        write_plan(&mut file, task, START_NS)?;
+        for k in 1..=max_steps {
+            agent.step_mean(task);
+            steps = k;
+            let out = task.outcomes()[0];
+            let e = &task.loco().envs()[0];
+            if out.episode_done {
+                ending = if out.blowup {
+                    Ending::BlowUp
+                } else if out.terminated {
+                    Ending::Fell
+                } else {
+                    Ending::LeftMap
+                };
+                let end = e.last_episode_end();
+                distance = end.base_pos[0] - end.spawn[0];
+                ret += out.reward as f64;
+                break;
+            }
+            ret += out.reward as f64;
+            speed_sum += e.state().base_lin_vel_world[0];
+            for ((name, now), before) in term_names.iter().zip(&e.episode_sums).zip(&prev_sums) {
+                terms.insert(*name, round6(now - before));
+            }
+            prev_sums.copy_from_slice(&e.episode_sums);
+            let t = START_NS + k * dt_ns;
+            file.write(
+                Topic::Reward,
+                t,
+                &RewardMsg {
+                    step: k,
+                    total: round6(out.reward as f64),
+                    r#return: round6(ret),
+                    terms: &terms,
+                },
+            )?;
+            distance = write_frame(&mut file, task.loco(), &frames, k, dt, weight, spawn)?;
+            write_plan(&mut file, task, t)?;
+        }
+        let written = file.count(Topic::State);
+        let file_bytes = file.finish()?;
+        let lane_length = lane.map(|l| l.length());
+        Ok(PlaySummary {
+            out: o.out.display().to_string(),
+            terrain: o.terrain.name().to_string(),
+            level: lane.map(|_| level),
+            table: lane.map(|_| crate::eval::eval_table_name(cfg).to_string()),
+            lane_length,
+            commanded_speed: speed,
+            steps,
+            frames: written,
+            seconds: steps as f64 * dt,
+            distance,
+            mean_forward_speed: speed_sum / (written.max(2) - 1) as f64,
+            fell: matches!(ending, Ending::Fell | Ending::BlowUp),
+            ending,
+            reached_goal: lane_length.map(|l| distance >= l),
+            total_reward: ret,
+            bodies: frames.len() - 1,
+            file_bytes,
+            full_collision: o.full_collision,
+            seed: o.seed,
+            checkpoint: ck.path.display().to_string(),
+        })
     }
-    let written = file.count(Topic::State);
-    let file_bytes = file.finish()?;
-    let lane_length = lane.as_ref().map(|l| l.length());
-    Ok(PlaySummary {
-        out: o.out.display().to_string(),
-        terrain: o.terrain.name().to_string(),
-        level: lane.as_ref().map(|_| level),
-        table: lane
-            .as_ref()
-            .map(|_| crate::eval::eval_table_name(&cfg).to_string()),
-        lane_length,
-        commanded_speed: speed,
-        steps,
-        frames: written,
-        seconds: steps as f64 * dt,
-        distance,
-        mean_forward_speed: speed_sum / (written.max(2) - 1) as f64,
-        fell: matches!(ending, Ending::Fell | Ending::BlowUp),
-        ending,
-        reached_goal: lane_length.map(|l| distance >= l),
-        total_reward: ret,
-        bodies: frames.len() - 1,
-        file_bytes,
-        full_collision: o.full_collision,
-        seed: o.seed,
-        checkpoint: ck.path.display().to_string(),
-    })
+}
+
+/// Colors of the plan's spheres: pelvis, left foot, right foot.
+const PLAN_COLORS: [foxglove::Color; 3] = [
+    foxglove::Color::rgb(0.2, 0.4, 1.0),
+    foxglove::Color::rgb(1.0, 0.3, 0.2),
+    foxglove::Color::rgb(0.2, 0.8, 0.3),
+];
+
+/// `/plan` at `t_ns`: one entity `plan` (replacing the last one) with a sphere
+/// for the pelvis and each foot of every predicted state, fading along the
+/// horizon (nothing when the task has no plan).
+fn write_plan<T: PlayTask>(file: &mut PlayFile, task: &mut T, t_ns: u64) -> Result<(), PlayError> {
+    let Some(poses) = task.plan_poses() else {
+        return Ok(());
+    };
+    let stamp = Time::from_nanos(t_ns);
+    let mut entity = foxglove::SceneEntity::new(stamp, WORLD, "plan", false);
+    let h = poses.len().max(1) as f64;
+    for (k, p) in poses.iter().enumerate() {
+        let fade = 1.0 - 0.7 * k as f64 / h;
+        for (at, (color, d)) in [p.pelvis, p.left_foot, p.right_foot]
+            .into_iter()
+            .zip(PLAN_COLORS.into_iter().zip([0.08, 0.05, 0.05]))
+        {
+            entity.spheres.push(foxglove::SpherePrimitive {
+                pose: foxglove::Pose::at(at.map(round5)),
+                size: Vector3::new([d; 3]),
+                color: foxglove::Color { a: fade, ..color },
+            });
+        }
+    }
+    file.write(
+        Topic::Plan,
+        t_ns,
+        &SceneUpdate {
+            deletions: Vec::new(),
+            entities: vec![entity],
+        },
+    )
 }
 
 /// `/command` message.

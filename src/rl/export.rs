@@ -40,8 +40,8 @@ fn checkpoint_agent(ck: &Checkpoint) -> Result<(ExperimentConfig, Agent), RlErro
     if cfg.task == crate::rl::config::TaskKind::Unified {
         return Err(RlError::Invalid(format!(
             "{}: a unified policy (task: unified) reads the world model's plan where a \
-             specialist reads scandots; its export (the policy with the world model's \
-             denoiser) is not built yet. `eval` runs it with the world model",
+             specialist reads scandots; export it as a bundle (`export --out DIR`: \
+             the policy, the world model's denoiser and the sampling loop)",
             ck.path.display()
         )));
     }
@@ -53,6 +53,13 @@ fn checkpoint_agent(ck: &Checkpoint) -> Result<(ExperimentConfig, Agent), RlErro
 /// Trace the checkpoint's actor into a TorchScript file at `out`.
 pub fn export(ck: &Checkpoint, out: &Path) -> Result<ExportInfo, RlError> {
     let (_, mut agent) = checkpoint_agent(ck)?;
+    trace_actor(&mut agent, out)
+}
+
+/// Trace `agent`'s deterministic actor (normalization included) into a
+/// TorchScript file at `out`: `forward(obs, history, scan)` on raw inputs, as
+/// [`export`] writes it (a unified policy's "scan" is its plan).
+pub fn trace_actor(agent: &mut Agent, out: &Path) -> Result<ExportInfo, RlError> {
     // traced weights become constants of the graph: they must not require grad
     agent.policy.vs.freeze();
     let d = agent.dims();

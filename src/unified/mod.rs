@@ -11,6 +11,7 @@
 //!   as a `VecTask`, and [`train`], `train unified`.
 pub mod amp;
 pub mod config;
+pub mod export;
 pub mod fk;
 pub mod plan;
 pub mod task;

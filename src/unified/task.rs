@@ -32,7 +32,7 @@ use super::config::UnifiedConfig;
 use super::fk::BodyFk;
 use super::plan::{History, Plan};
 use super::track::TrackingErrors;
-use crate::env::obs::{CRITIC_DIM, OBS_DIM, SCAN_DIM};
+use crate::env::obs::{ANG_VEL, COMMAND, CRITIC_DIM, OBS_DIM, SCAN_DIM};
 use crate::env::task::{EnvSnapshot, TaskDims, VecTask};
 use crate::env::{Outcome, StepInfo, VecEnv};
 use crate::rl::config::ExperimentConfig;
@@ -69,8 +69,17 @@ struct Sums {
     nonfinite: usize,
 }
 
+/// One predicted state of a plan in the world ([`UnifiedTask::plan_in_world`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlannedPose {
+    pub pelvis: [f64; 3],
+    pub left_foot: [f64; 3],
+    pub right_foot: [f64; 3],
+}
+
 pub struct UnifiedTask {
     env: VecEnv,
+    fk_scales: crate::env::config::ObsScales,
     wm: WorldModel,
     pub cfg: UnifiedConfig,
     fk: BodyFk,
@@ -140,6 +149,7 @@ impl UnifiedTask {
             fake: Vec::new(),
             sums: Sums::default(),
             env,
+            fk_scales: cfg.env.observation.scales.clone(),
             wm,
             cfg: u,
             fk,
@@ -184,6 +194,56 @@ impl UnifiedTask {
     /// Every env's plan, `[n, H * OBS_DIM]`.
     pub fn plans(&self) -> &[f32] {
         self.plan.rows()
+    }
+
+    /// Env `i`'s plan placed in the world, for drawing (`play`'s `/plan`): one
+    /// [`PlannedPose`] per predicted state, `None` while it has no plan. A
+    /// state fixes the bodies relative to the pelvis in its heading frame
+    /// (forward kinematics), not where the pelvis is: the pelvis of predicted
+    /// state `k` is put at the robot's pelvis now, moved along the heading by
+    /// the predicted states' commanded velocities (`k` control steps of them),
+    /// its heading turned by their predicted yaw rates.
+    pub fn plan_in_world(&mut self, i: usize) -> Option<Vec<PlannedPose>> {
+        let (plan, live) = self.plan.future(i);
+        if !live {
+            return None;
+        }
+        let plan = plan.to_vec();
+        let sc = self.fk_scales.clone();
+        let s = self.env.envs()[i].state();
+        let mut pos = s.base_pos;
+        let mut yaw = crate::env::state::rpy(&s.base_rot)[2];
+        let foot = |name: &str| {
+            crate::robot::TRACKED_BODIES
+                .iter()
+                .position(|b| *b == name)
+                .expect("the ankles are tracked bodies")
+        };
+        let (lf, rf) = (foot("left_ankle_roll_link"), foot("right_ankle_roll_link"));
+        let mut out = Vec::with_capacity(self.plan.horizon());
+        for st in plan.chunks_exact(OBS_DIM) {
+            let c = |a: usize| f64::from(st[COMMAND.start + a]) / sc.commands[a];
+            let wz = f64::from(st[ANG_VEL.start + 2]) / sc.ang_vel;
+            yaw += wz * self.dt;
+            let (sy, cy) = yaw.sin_cos();
+            let (vx, vy) = (c(0), c(1));
+            pos[0] += (cy * vx - sy * vy) * self.dt;
+            pos[1] += (sy * vx + cy * vy) * self.dt;
+            let b = self.fk.from_state(st);
+            let place = |r: [f64; 3]| {
+                [
+                    pos[0] + cy * r[0] - sy * r[1],
+                    pos[1] + sy * r[0] + cy * r[1],
+                    pos[2] + r[2],
+                ]
+            };
+            out.push(PlannedPose {
+                pelvis: pos,
+                left_foot: place(b.pos[lf]),
+                right_foot: place(b.pos[rf]),
+            });
+        }
+        Some(out)
     }
 
     /// After every env was reset: histories of `s_0`, fresh plans, the sampling

@@ -140,13 +140,14 @@ impl Block {
 
     /// `x`: `[B, T, d]`; `c_act`: `SiLU(c)`, `[B, d]`.
     fn forward(&self, x: &Tensor, c_act: &Tensor) -> Tensor {
-        let (b, t, d, h) = (x.size()[0], x.size()[1], self.hidden, self.heads);
+        // no batch size read from the input: a traced export keeps any batch
+        let (t, d, h) = (x.size()[1], self.hidden, self.heads);
         let m = self.ada.forward(c_act).chunk(6, -1);
         let a = modulate(&layer_norm(x, d), &m[0], &m[1]);
         let qkv = self
             .qkv
             .forward(&a)
-            .view([b, t, 3, h, d / h])
+            .view([-1, t, 3, h, d / h])
             .permute([2, 0, 3, 1, 4]);
         let att = Tensor::scaled_dot_product_attention(
             &qkv.get(0),
@@ -159,7 +160,7 @@ impl Block {
             false,
         )
         .transpose(1, 2)
-        .reshape([b, t, d]);
+        .reshape([-1, t, d]);
         let x = x + m[2].unsqueeze(1) * self.proj.forward(&att);
         let a = modulate(&layer_norm(&x, d), &m[3], &m[4]);
         let f = self.fc2.forward(&self.fc1.forward(&a).gelu("tanh"));
@@ -350,10 +351,9 @@ impl Denoiser {
         let out = self.out.forward(&x);
         match &self.skip {
             Some(skip) => {
-                let b = hist.size()[0];
                 out + skip
-                    .forward(&hist.reshape([b, -1]))
-                    .view([b, h, self.state_dim])
+                    .forward(&hist.flatten(1, -1))
+                    .view([-1, h, self.state_dim])
             }
             None => out,
         }

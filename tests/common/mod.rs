@@ -120,14 +120,20 @@ pub fn assert_acts_alike(
         old.prepare(&*task);
         new.prepare(&*task);
         let (a, b) = (old.act_mean(), new.act_mean());
-        let max = a
-            .iter()
-            .zip(&b)
-            .map(|(x, y)| (x - y).abs())
-            .fold(0.0, f32::max);
+        let max = max_abs_diff(&a, &b);
         assert!(max < 1e-6, "actions differ by {max}");
         task.step(&a);
         old.after_step(&*task);
         new.after_step(&*task);
     }
+}
+
+/// The largest |a_i - b_i|.
+#[allow(dead_code)]
+pub fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
+    assert_eq!(a.len(), b.len());
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max)
 }
