@@ -321,6 +321,44 @@ fn symmetry_augmentation_measures_kl_on_the_original_samples() {
 }
 
 #[test]
+fn mirrored_samples_start_at_ratio_one_with_the_policy_symmetry_ratio() {
+    // One epoch of one minibatch: the clip fraction is measured before any
+    // step. With `symmetry_ratio: policy` every sample, mirrored or not, starts
+    // at ratio 1 (none clipped); with rsl_rl's `behavior` the committed walker,
+    // which is not left/right symmetric, has its mirrored half far outside the
+    // clip range.
+    let _t = torch_lock();
+    let dir = Scratch::new("sym_ratio");
+    let walker = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("models/checkpoints/flat/checkpoints/latest.pt");
+    let init = format!("train.init_checkpoint={}", walker.display());
+    let mut clipped = Vec::new();
+    for ratio in ["behavior", "policy"] {
+        let set = format!("ppo.symmetry_ratio={ratio}");
+        let cfg = load_config(
+            "specialist/flat.yaml",
+            &[
+                &init,
+                &set,
+                "ppo.symmetry=true",
+                "env.n_envs=8",
+                "ppo.num_steps=8",
+                "ppo.num_epochs=1",
+                "ppo.num_minibatches=1",
+                "train.iterations=1",
+                "ppo.schedule=fixed",
+                "env.sim.integrator=implicit",
+            ],
+        );
+        let out = dir.0.join(ratio);
+        runner::train(&cfg, &out, false, true).unwrap();
+        clipped.push(column(&out, "clip_fraction")[0]);
+    }
+    assert!(clipped[0] > 0.2, "behavior: {clipped:?}");
+    assert_eq!(clipped[1], 0.0, "policy: {clipped:?}");
+}
+
+#[test]
 fn walker_transfers_into_a_scan_encoder_policy_acting_the_same() {
     use dreampolicy::env::VecEnv;
     use dreampolicy::rl::{Agent, VecTask};

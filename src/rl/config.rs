@@ -207,6 +207,24 @@ pub struct PpoConfig {
     /// mirror of its (detached) mean on the original. 0 leaves it out.
     #[serde(default)]
     pub mirror_loss_coef: f64,
+    /// With `symmetry`: the old log-probability of a mirrored sample
+    /// (`behavior`: the original's, rsl_rl's; `policy`: the old policy's own on
+    /// the mirrored state and action).
+    #[serde(default)]
+    pub symmetry_ratio: SymmetryRatio,
+}
+
+/// How the mirrored half of a symmetry-augmented batch enters PPO's ratio.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SymmetryRatio {
+    /// The original sample's old log-probability (rsl_rl: the behaviour
+    /// policy of a mirrored sample is the mirror of the old policy).
+    #[default]
+    Behavior,
+    /// The old policy's log-probability of the mirrored action in the mirrored
+    /// state: each mirrored sample starts the update at ratio 1.
+    Policy,
 }
 
 impl Default for PpoConfig {
@@ -229,6 +247,7 @@ impl Default for PpoConfig {
             normalize_obs: true,
             symmetry: false,
             mirror_loss_coef: 0.0,
+            symmetry_ratio: SymmetryRatio::Behavior,
         }
     }
 }

@@ -7,10 +7,11 @@ use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 use tch::{Kind, Tensor};
 
+use super::agent::Agent;
 use super::optim::Adam;
 use super::policy::ActorCritic;
 use super::storage::RolloutStorage;
-use crate::rl::config::{LrSchedule, PpoConfig};
+use crate::rl::config::{LrSchedule, PpoConfig, SymmetryRatio};
 
 /// Mean losses and diagnostics of one update.
 #[derive(Debug, Clone, Default, Serialize)]
@@ -43,9 +44,43 @@ fn signed_perm(sp: &crate::env::mirror::SignedPerm) -> (Tensor, Tensor) {
     (Tensor::from_slice(&idx), Tensor::from_slice(&sp.sign))
 }
 
-/// `[x; mirror(x)]` along the batch dimension.
-fn with_mirror(x: &Tensor, m: &(Tensor, Tensor)) -> Tensor {
-    Tensor::cat(&[x.shallow_clone(), x.index_select(1, &m.0) * &m.1], 0)
+/// `[x; mirror(x)]` along the batch dimension. `x` holds normalized rows;
+/// with `norm` (the normalizer's mean, std and clip) the mirror is taken of
+/// the raw values and normalized again: the running statistics are not
+/// symmetric (a gait that leans left has other means on its left joints), so
+/// mirroring normalized values would give a mirrored state the policy never
+/// sees.
+fn with_mirror(x: &Tensor, m: &(Tensor, Tensor), norm: Option<&(Tensor, Tensor, f64)>) -> Tensor {
+    let mirrored = match norm {
+        Some((mean, std, clip)) => {
+            let raw = x * std + mean;
+            ((raw.index_select(1, &m.0) * &m.1 - mean) / std).clamp(-clip, *clip)
+        }
+        None => x.index_select(1, &m.0) * &m.1,
+    };
+    Tensor::cat(&[x.shallow_clone(), mirrored], 0)
+}
+
+/// The normalizers of `agent` as `(mean, std, clip)` for actor inputs (the
+/// observation's, tiled over the history and the current state), critic inputs
+/// and scandots; `None` each when inputs are not normalized.
+fn mirror_norms(agent: &Agent) -> [Option<(Tensor, Tensor, f64)>; 3] {
+    if !agent.normalize {
+        return [None, None, None];
+    }
+    let k = agent.policy.history_len() as i64 + 1;
+    let (om, os) = agent.obs_norm.tensors();
+    let (cm, cs) = agent.critic_norm.tensors();
+    let (sm, ss) = agent.scan_norm.tensors();
+    [
+        Some((
+            om.repeat([k]),
+            os.repeat([k]),
+            f64::from(agent.obs_norm.clip),
+        )),
+        Some((cm, cs, f64::from(agent.critic_norm.clip))),
+        Some((sm, ss, f64::from(agent.scan_norm.clip))),
+    ]
 }
 
 fn tensor(v: &[f32], rows: i64) -> Tensor {
@@ -89,8 +124,9 @@ impl Ppo {
         }
     }
 
-    /// Update on a full storage; `seed` orders the minibatches.
-    pub fn update(&mut self, policy: &ActorCritic, st: &RolloutStorage, seed: u64) -> Losses {
+    /// Update `agent`'s policy on a full storage; `seed` orders the minibatches.
+    pub fn update(&mut self, agent: &Agent, st: &RolloutStorage, seed: u64) -> Losses {
+        let policy = &agent.policy;
         let c = &self.cfg.clone();
         let b = (st.filled * st.n) as i64;
         let mut actor_in = tensor(&st.actor_in, b);
@@ -117,21 +153,35 @@ impl Ppo {
         };
 
         // symmetry augmentation: the batch and its mirror image, with the same
-        // advantages, returns, values and old log-probabilities (rsl_rl). The
-        // KL that steers the learning rate is measured on the original samples
-        // only, as rsl_rl does: the mirrored ones are compared with the mirror
-        // of the old mean, which an asymmetric policy is far from (a G1 walker
-        // fine-tuned with it read KL ~100 and the rate fell to its floor).
+        // advantages, returns and values (rsl_rl). The mirrored samples' old
+        // log-probabilities are the originals' (`symmetry_ratio: behavior`,
+        // rsl_rl's: the mirror of the old policy acted them) or the old
+        // policy's own on the mirrored states and actions (`policy`: every
+        // sample starts the update at ratio 1). With `behavior`, a policy that
+        // is not symmetric to ~0.01 per joint puts nearly every mirrored sample
+        // outside the clip range, and those with a negative advantage and a
+        // large ratio dominate the gradient. The KL that steers the learning
+        // rate is measured on the original samples only, as rsl_rl does.
         let b_orig = b;
         let mut b = b;
         if let Some([ma, mc, ms, mact]) = &self.mirror {
-            actor_in = with_mirror(&actor_in, ma);
-            critic_in = with_mirror(&critic_in, mc);
-            scan = scan.map(|s| with_mirror(&s, ms));
-            actions = with_mirror(&actions, mact);
-            old_mean = with_mirror(&old_mean, mact);
+            let [na, nc, ns] = mirror_norms(agent);
+            actor_in = with_mirror(&actor_in, ma, na.as_ref());
+            critic_in = with_mirror(&critic_in, mc, nc.as_ref());
+            scan = scan.map(|s| with_mirror(&s, ms, ns.as_ref()));
+            actions = with_mirror(&actions, mact, None);
+            old_mean = with_mirror(&old_mean, mact, None);
             let twice = |t: &Tensor| Tensor::cat(&[t.shallow_clone(), t.shallow_clone()], 0);
-            old_logp = twice(&old_logp);
+            old_logp = match c.symmetry_ratio {
+                SymmetryRatio::Behavior => twice(&old_logp),
+                SymmetryRatio::Policy => tch::no_grad(|| {
+                    let pick = |t: &Tensor| t.narrow(0, b, b);
+                    let mean =
+                        policy.actor_mean(&pick(&actor_in), scan.as_ref().map(pick).as_ref());
+                    let logp = ActorCritic::log_prob(&mean, &old_std, &pick(&actions));
+                    Tensor::cat(&[old_logp.shallow_clone(), logp], 0)
+                }),
+            };
             old_values = twice(&old_values);
             returns = twice(&returns);
             adv = twice(&adv);

@@ -265,7 +265,7 @@ impl<'a, T: VecTask> Trainer<'a, T> {
             .compute_returns(&last, c.gamma as f32, c.lam as f32);
         let t1 = Instant::now();
         let losses = self.ppo.update(
-            &self.agent.policy,
+            &self.agent,
             &self.storage,
             seed ^ (self.iteration as u64).wrapping_mul(0x9E37_79B9),
         );
