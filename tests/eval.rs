@@ -28,6 +28,7 @@ fn opts(episodes: usize) -> EvalOptions {
         seed: 3,
         threads: 1,
         level: None,
+        table: dreampolicy::eval::EvalTable::Eval,
     }
 }
 
@@ -110,6 +111,7 @@ fn foot_clearance_over_a_gap_is_measured_against_the_platforms() {
     let o = EvalOptions {
         terrain: TerrainKind::Gap,
         level: Some(0),
+        table: dreampolicy::eval::EvalTable::Eval,
         ..opts(2)
     };
     let r = evaluate(&ck, &o).unwrap();
@@ -297,7 +299,12 @@ fn terrain_lanes_are_walked_and_episodes_spread_over_lanes() {
     // a 1 mm lane: every episode ends on its first step, on any terrain
     let ck = tiny_checkpoint(
         &dir,
-        &["eval.lane_length=0.001", "eval.n_envs=3", "eval.lanes=2"],
+        &[
+            "eval.lane_length=0.001",
+            "eval.n_envs=3",
+            "eval.lanes=2",
+            "env.terrain.map.num_levels=3",
+        ],
     );
     let o = EvalOptions {
         terrain: TerrainKind::Stair,
@@ -327,6 +334,32 @@ fn terrain_lanes_are_walked_and_episodes_spread_over_lanes() {
     .unwrap_err()
     .to_string();
     assert!(e.contains("level 10") && e.contains("top level 9"), "{e}");
+    assert_eq!(r.table, Some(dreampolicy::eval::EvalTable::Eval));
+    // `--table training`: the lanes of the checkpoint's own curriculum (3 levels)
+    let training = EvalOptions {
+        table: dreampolicy::eval::EvalTable::Training,
+        ..o.clone()
+    };
+    let e = evaluate(&ck, &training).unwrap_err().to_string();
+    assert!(
+        e.contains("level 5")
+            && e.contains("the training curriculum's table")
+            && e.contains("top level 2"),
+        "{e}"
+    );
+    let r = evaluate(
+        &ck,
+        &EvalOptions {
+            level: Some(2),
+            ..training
+        },
+    )
+    .unwrap();
+    assert_eq!(
+        (r.level, r.table),
+        (Some(2), Some(dreampolicy::eval::EvalTable::Training))
+    );
+    assert_eq!(r.episodes, 5);
 
     // 50 m in 0.5 s on uneven ground: every episode is counted once, none succeeds
     let dir2 = Scratch::new("eval-lanes2");

@@ -314,6 +314,7 @@ fn a_resumed_tiny_unified_run_is_bit_identical() {
             seed: 0,
             threads: 1,
             level: Some(0),
+            table: dreampolicy::eval::EvalTable::Eval,
         };
         let r = dreampolicy::eval::evaluate(&ca, &o).unwrap();
         assert_eq!(r.episodes, 2);

@@ -58,6 +58,8 @@ pub struct EvalReport {
     pub lane_length: f64,
     /// Curriculum level of the lanes (None for flat lanes, which are the plane).
     pub level: Option<usize>,
+    /// The table the lanes were drawn from (None for flat lanes).
+    pub table: Option<EvalTable>,
     pub full_collision: bool,
     pub checkpoint: String,
     pub checkpoint_iteration: usize,
@@ -87,6 +89,21 @@ pub struct EvalOptions {
     pub threads: usize,
     /// Lane difficulty level; `None` takes the config's `eval.level`.
     pub level: Option<usize>,
+    /// The table the lanes are drawn from.
+    pub table: EvalTable,
+}
+
+/// Which terrain table an evaluation's lanes come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EvalTable {
+    /// The config's `eval.terrain` (the paper's table unless it says
+    /// otherwise): every policy measured on the same lanes.
+    #[default]
+    Eval,
+    /// The checkpoint's own training curriculum (`env.terrain.map`): where its
+    /// curriculum level means what the lane's level means.
+    Training,
 }
 
 /// The env config of an evaluation, derived from the training config.
@@ -129,7 +146,10 @@ pub fn eval_env_config(cfg: &ExperimentConfig, o: &EvalOptions) -> EnvConfig {
 /// `eval.terrain` (the paper's table unless the config says otherwise) at `eval.level`, `eval.lanes` different lanes
 /// (seeds `o.seed`, `o.seed + 1`, ...) sharing the episodes evenly.
 pub fn evaluate(ck: &Checkpoint, o: &EvalOptions) -> Result<EvalReport, RlError> {
-    let cfg = ck.config()?;
+    let mut cfg = ck.config()?;
+    if o.table == EvalTable::Training {
+        cfg.eval.terrain = cfg.env.terrain.map.clone();
+    }
     let env_cfg = eval_env_config(&cfg, o);
     evaluate_in(ck, &cfg, &env_cfg, o)
 }
@@ -185,6 +205,7 @@ pub fn evaluate_in(
         swing_rise: t.rise_sum / t.rises as f64,
         lane_length: length,
         level: (o.terrain != TerrainKind::Flat).then_some(level),
+        table: (o.terrain != TerrainKind::Flat).then_some(o.table),
         full_collision: o.full_collision,
         checkpoint: ck.path.display().to_string(),
         checkpoint_iteration: ck.meta.iteration,
@@ -227,10 +248,13 @@ pub fn eval_lane(
 }
 
 /// What `eval.terrain` is, in words: "the paper's table" when the config keeps
-/// the default, else "the config's eval.terrain".
+/// the default, "the training curriculum's table" when it is the config's own
+/// `env.terrain.map` (`eval --table training`), else "the config's eval.terrain".
 pub fn eval_table_name(cfg: &ExperimentConfig) -> &'static str {
     if cfg.eval.terrain == crate::terrain::TerrainConfig::default() {
         "the paper's table"
+    } else if cfg.eval.terrain == cfg.env.terrain.map {
+        "the training curriculum's table"
     } else {
         "the config's eval.terrain"
     }

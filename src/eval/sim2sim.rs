@@ -9,7 +9,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use super::{eval_env_config, evaluate_in, EvalOptions, EvalReport};
+use super::{eval_env_config, evaluate_in, EvalOptions, EvalReport, EvalTable};
 use crate::config::{parse_value, ConfigError};
 use crate::env::config::EnvConfig;
 use crate::rl::checkpoint::Checkpoint;
@@ -214,6 +214,7 @@ pub fn run_cells(
         seed: c.seed,
         threads,
         level: c.level,
+        table: EvalTable::Eval,
     };
     let base = eval_env_config(cfg, &o);
     let build = this_build();

@@ -752,6 +752,7 @@ fn evaluate_run(
             seed: e.seed,
             threads,
             level: e.level,
+            table: crate::eval::EvalTable::Eval,
         },
     )
     .map_err(|err| format!("eval: {err}"))?;
