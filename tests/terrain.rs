@@ -10,8 +10,8 @@ use common::Scratch;
 use dreampolicy::sim::{Data, HeightField, Model, ObjType};
 use dreampolicy::terrain::render::{lane_png_size, png_size, render_kind, render_lane, render_map};
 use dreampolicy::terrain::{
-    tile_rng, Curriculum, TerrainConfig, TerrainError, TerrainKind, TerrainMap, TileParams,
-    WaveParams, COMBINED_PAIRS,
+    tile_rng, Curriculum, LevelSampling, TerrainConfig, TerrainError, TerrainKind, TerrainMap,
+    TileParams, WaveParams, COMBINED_PAIRS,
 };
 
 const SEEDS: [u64; 3] = [1, 2, 3];
@@ -1069,4 +1069,61 @@ fn render_writes_png_of_the_expected_size() {
     render_lane(&lane, out.join("stair_gap.png")).unwrap();
     let err = render_map(map, "/proc/no/such/dir/x.png").unwrap_err();
     assert!(matches!(err, TerrainError::Io { .. }), "{err}");
+}
+
+/// `level_sampling: bound` (legged_gym's): every tile of a level holds exactly
+/// the level's bound, where the paper's sampling draws between the easy end and
+/// the bound; both draw the same random numbers, so the other draws agree.
+#[test]
+fn bound_level_sampling_draws_each_levels_bound() {
+    let mut cfg = TerrainConfig::default();
+    cfg.bridge.width = Curriculum([1.0, 0.2]);
+    cfg.stair.height = Curriculum([0.0, 0.2]);
+    let widths = |cfg: &TerrainConfig, level: usize| -> Vec<f64> {
+        (0..8u64)
+            .map(|seed| {
+                let lane =
+                    TerrainMap::lane(cfg, TerrainKind::Bridge, level, 10.0, 4.0, seed).unwrap();
+                match lane.segments()[0].params {
+                    TileParams::Bridge { width, .. } => width,
+                    ref p => panic!("{p:?}"),
+                }
+            })
+            .collect()
+    };
+    let paper = widths(&cfg, 7);
+    let bound = 1.0 - 0.8 * 7.0 / 9.0;
+    // the paper's draws spread between 1.0 and the bound
+    assert!(
+        paper.iter().all(|w| *w >= bound - 0.05 && *w <= 1.0),
+        "{paper:?}"
+    );
+    assert!(paper.iter().any(|w| *w > bound + 0.1), "{paper:?}");
+    cfg.level_sampling = LevelSampling::Bound;
+    for level in [0, 4, 7, 9] {
+        let want = 1.0 - 0.8 * level as f64 / 9.0;
+        for w in widths(&cfg, level) {
+            assert!(
+                (w - want).abs() <= cfg.horizontal_scale,
+                "level {level}: {w} for {want}"
+            );
+        }
+    }
+    for level in [2, 8] {
+        let want = 0.2 * level as f64 / 9.0;
+        for seed in 0..4u64 {
+            let lane = TerrainMap::lane(&cfg, TerrainKind::Stair, level, 10.0, 4.0, seed).unwrap();
+            let TileParams::Stair { height, .. } = lane.segments()[0].params else {
+                panic!();
+            };
+            assert!(
+                (height - want).abs() <= cfg.vertical_scale,
+                "level {level}: {height} for {want}"
+            );
+        }
+    }
+    // YAML spells it as the enum's name
+    let c = TerrainConfig::from_yaml_str("level_sampling: bound").unwrap();
+    assert_eq!(c.level_sampling, LevelSampling::Bound);
+    assert!(TerrainConfig::from_yaml_str("level_sampling: hardest").is_err());
 }

@@ -16,7 +16,34 @@ use super::{TerrainError, TerrainKind};
 #[serde(transparent)]
 pub struct Curriculum(pub [f64; 2]);
 
+/// How tile parameters follow the difficulty ([`TerrainConfig::level_sampling`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LevelSampling {
+    /// `p0 + u (p1 - p0) d`, `u` uniform in [0, 1] (the paper's appendix).
+    #[default]
+    Paper,
+    /// `p0 + (p1 - p0) d` (legged_gym's).
+    Bound,
+}
+
 impl Curriculum {
+    /// The value at difficulty `d` under `mode`: [`Curriculum::sample`] or
+    /// [`Curriculum::bound`] (which still draws, so that the tile's other
+    /// draws are the same in both modes).
+    pub fn draw<R: Rng + ?Sized>(&self, d: f64, mode: LevelSampling, rng: &mut R) -> f64 {
+        let v = self.sample(d, rng);
+        match mode {
+            LevelSampling::Paper => v,
+            LevelSampling::Bound => self.bound(d),
+        }
+    }
+
+    /// [`Curriculum::draw`] rounded to the nearest integer (counts).
+    pub fn draw_count<R: Rng + ?Sized>(&self, d: f64, mode: LevelSampling, rng: &mut R) -> usize {
+        self.draw(d, mode, rng).round().max(0.0) as usize
+    }
+
     /// Draw the value for difficulty `d = level / max_level` in `[0, 1]`.
     pub fn sample<R: Rng + ?Sized>(&self, d: f64, rng: &mut R) -> f64 {
         let [p0, p1] = self.0;
@@ -209,6 +236,12 @@ params!(
         min_roughness: f64 = 0.005,
         /// Length of the slope bridge's arch (m), the paper's 18 m.
         arch_length: f64 = 18.0,
+        /// How a tile's parameters follow its level: `paper` (the paper's
+        /// formula, uniform between the easy end and the level's bound, so that
+        /// a level holds every easier lane too) or `bound` (exactly the level's
+        /// bound, legged_gym's: a curriculum level then says the hardest lane
+        /// it holds, and every env trains at its frontier).
+        level_sampling: LevelSampling = LevelSampling::Paper,
         /// A cell is an edge where a 4-neighbour differs by more than this (m).
         edge_threshold: f64 = 0.05,
         uneven: UnevenParams = UnevenParams::default(),

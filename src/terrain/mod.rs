@@ -27,8 +27,8 @@ mod shapes;
 use std::path::PathBuf;
 
 pub use config::{
-    BridgeParams, Curriculum, GapParams, SlopeBridgeParams, SlopeParams, StairParams,
-    TerrainConfig, UnevenParams, WaveParams,
+    BridgeParams, Curriculum, GapParams, LevelSampling, SlopeBridgeParams, SlopeParams,
+    StairParams, TerrainConfig, UnevenParams, WaveParams,
 };
 pub use kinds::{TerrainKind, COMBINED_PAIRS};
 pub use lane::{Lane, Segment};

@@ -174,6 +174,18 @@ pub(crate) struct Ctx<'a> {
     pub d: f64,
 }
 
+impl Ctx<'_> {
+    /// A parameter's value for this tile (its level's difficulty, the config's
+    /// `level_sampling`).
+    fn draw<R: Rng + ?Sized>(&self, c: &super::config::Curriculum, rng: &mut R) -> f64 {
+        c.draw(self.d, self.cfg.level_sampling, rng)
+    }
+
+    fn draw_count<R: Rng + ?Sized>(&self, c: &super::config::Curriculum, rng: &mut R) -> usize {
+        c.draw_count(self.d, self.cfg.level_sampling, rng)
+    }
+}
+
 /// Draw `kind` into `region` of `c`; the rest of `c` is left alone.
 pub(crate) fn draw<R: Rng + ?Sized>(
     kind: TerrainKind,
@@ -191,7 +203,7 @@ pub(crate) fn draw<R: Rng + ?Sized>(
         TerrainKind::Wave => wave(c, region, ctx, rng),
         TerrainKind::Slope => slope(c, region, ctx),
         TerrainKind::BalancingBeam => {
-            let width = c.cells(ctx.cfg.bridge.width.sample(ctx.d, rng), 1);
+            let width = c.cells(ctx.draw(&ctx.cfg.bridge.width, rng), 1);
             gaps(c, region, ctx, Some(width), rng)
         }
         TerrainKind::SlopeBridge => slope_bridge(c, region, ctx, rng),
@@ -201,14 +213,14 @@ pub(crate) fn draw<R: Rng + ?Sized>(
 fn uneven<R: Rng + ?Sized>(c: &mut Canvas, r: Region, ctx: &Ctx, rng: &mut R) -> TileParams {
     let (p, d, vs) = (&ctx.cfg.uneven, ctx.d, ctx.cfg.vertical_scale);
     let area = r.len() as f64 * c.hs * c.ny as f64 * c.hs;
-    let blocks = (p.count.sample(d, rng) * area / p.reference_area).round() as usize;
+    let blocks = (ctx.draw(&p.count, rng) * area / p.reference_area).round() as usize;
     for _ in 0..blocks {
-        let sx = c.cells(p.size.sample(d, rng), 1).min(r.len());
-        let sy = c.cells(p.size.sample(d, rng), 1).min(c.ny);
+        let sx = c.cells(ctx.draw(&p.size, rng), 1).min(r.len());
+        let sy = c.cells(ctx.draw(&p.size, rng), 1).min(c.ny);
         let i = rng.random_range(r.i0..=r.i1 - sx);
         let j = rng.random_range(0..=c.ny - sy);
         let sign = if rng.random::<bool>() { 1.0 } else { -1.0 };
-        let h = sign * quantize(p.height.sample(d, rng), vs);
+        let h = sign * quantize(ctx.draw(&p.height, rng), vs);
         c.fill(i..i + sx, j..j + sy, h);
     }
     TileParams::Uneven {
@@ -221,10 +233,10 @@ fn uneven<R: Rng + ?Sized>(c: &mut Canvas, r: Region, ctx: &Ctx, rng: &mut R) ->
 }
 
 fn stair<R: Rng + ?Sized>(c: &mut Canvas, r: Region, ctx: &Ctx, rng: &mut R) -> TileParams {
-    let (p, d) = (&ctx.cfg.stair, ctx.d);
-    let height = quantize(p.height.sample(d, rng), ctx.cfg.vertical_scale);
-    let tread = c.cells(p.tread.sample(d, rng), 1);
-    let wanted = p.steps.sample_count(d, rng).max(1);
+    let p = &ctx.cfg.stair;
+    let height = quantize(ctx.draw(&p.height, rng), ctx.cfg.vertical_scale);
+    let tread = c.cells(ctx.draw(&p.tread, rng), 1);
+    let wanted = ctx.draw_count(&p.steps, rng).max(1);
     // n risers up and n down around the top tread: 2 (n - 1) treads + the top
     let top = c.cells(p.top_length, 1).min(r.len());
     let fit = 1 + (r.len() - top) / (2 * tread);
@@ -258,14 +270,13 @@ fn gaps<R: Rng + ?Sized>(
     beam: Option<usize>,
     rng: &mut R,
 ) -> TileParams {
-    let (p, d, pit) = (
+    let (p, pit) = (
         &ctx.cfg.gap,
-        ctx.d,
         -quantize(ctx.cfg.pit_depth, ctx.cfg.vertical_scale),
     );
-    let platform = c.cells(p.platform.sample(d, rng), 1);
-    let gap = c.cells(p.gap.sample(d, rng), 1).min(r.len());
-    let wanted = p.count.sample_count(d, rng).max(1);
+    let platform = c.cells(ctx.draw(&p.platform, rng), 1);
+    let gap = c.cells(ctx.draw(&p.gap, rng), 1).min(r.len());
+    let wanted = ctx.draw_count(&p.count, rng).max(1);
     // n gaps and the n - 1 platforms between them
     let count = wanted.min((r.len() + platform) / (gap + platform)).max(1);
     let end = r.i0 + count * gap + (count - 1) * platform;
@@ -274,7 +285,7 @@ fn gaps<R: Rng + ?Sized>(
             for k in 0..count {
                 let i = r.i0 + k * (gap + platform);
                 let depth = match p.depth {
-                    Some(depth) => -quantize(depth.sample(d, rng), ctx.cfg.vertical_scale),
+                    Some(depth) => -quantize(ctx.draw(&depth, rng), ctx.cfg.vertical_scale),
                     None => pit,
                 };
                 c.columns(i..i + gap, |_| depth);
@@ -308,9 +319,7 @@ fn gaps<R: Rng + ?Sized>(
 }
 
 fn bridge<R: Rng + ?Sized>(c: &mut Canvas, r: Region, ctx: &Ctx, rng: &mut R) -> TileParams {
-    let width = c
-        .cells(ctx.cfg.bridge.width.sample(ctx.d, rng), 1)
-        .min(c.ny);
+    let width = c.cells(ctx.draw(&ctx.cfg.bridge.width, rng), 1).min(c.ny);
     let pit = -quantize(ctx.cfg.pit_depth, ctx.cfg.vertical_scale);
     c.columns(r.i0..r.i1, |_| pit);
     c.fill(r.i0..r.i1, c.centre_strip(width), 0.0);
@@ -322,11 +331,11 @@ fn bridge<R: Rng + ?Sized>(c: &mut Canvas, r: Region, ctx: &Ctx, rng: &mut R) ->
 }
 
 fn wave<R: Rng + ?Sized>(c: &mut Canvas, r: Region, ctx: &Ctx, rng: &mut R) -> TileParams {
-    let (p, d) = (&ctx.cfg.wave, ctx.d);
-    let n = p.count.sample_count(d, rng);
+    let p = &ctx.cfg.wave;
+    let n = ctx.draw_count(&p.count, rng);
     let waves: Vec<Wave> = (0..n)
         .map(|_| Wave {
-            amplitude: p.amplitude.sample(d, rng),
+            amplitude: ctx.draw(&p.amplitude, rng),
             wavelength: rng.random_range(p.wavelength[0]..=p.wavelength[1]),
             direction: rng.random_range(0.0..2.0 * PI),
             phase: rng.random_range(0.0..2.0 * PI),
@@ -388,8 +397,8 @@ fn slope(c: &mut Canvas, r: Region, ctx: &Ctx) -> TileParams {
 
 fn slope_bridge<R: Rng + ?Sized>(c: &mut Canvas, r: Region, ctx: &Ctx, rng: &mut R) -> TileParams {
     let cfg = ctx.cfg;
-    let width = c.cells(cfg.bridge.width.sample(ctx.d, rng), 1).min(c.ny);
-    let mut amplitude = cfg.slope_bridge.amplitude.sample(ctx.d, rng);
+    let width = c.cells(ctx.draw(&cfg.bridge.width, rng), 1).min(c.ny);
+    let mut amplitude = ctx.draw(&cfg.slope_bridge.amplitude, rng);
     let arch = c.cells(cfg.arch_length, 2).min(r.len()).max(2);
     // a region shorter than the arch gets a scaled-down arch: same steepness
     amplitude *= (c.x(arch) / cfg.arch_length).min(1.0);
