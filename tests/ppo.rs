@@ -359,6 +359,37 @@ fn mirrored_samples_start_at_ratio_one_with_the_policy_symmetry_ratio() {
 }
 
 #[test]
+fn dual_clip_bounds_the_loss_of_negative_advantages_by_hand() {
+    use dreampolicy::rl::ppo::surrogate_per_sample;
+    let v = |t: &tch::Tensor| Vec::<f32>::try_from(t).unwrap();
+    // log-ratios: ln 2 (ratio 2), 30 (a mirrored sample far in the policy's
+    // tail), ln 0.5; advantages +1, -1, -1
+    let lr = tch::Tensor::from_slice(&[2f32.ln(), 30.0, 0.5f32.ln()]);
+    let adv = tch::Tensor::from_slice(&[1.0f32, -1.0, -1.0]);
+    let (plain, _) = surrogate_per_sample(&lr, &adv, 0.2, None);
+    let plain = v(&plain);
+    // A > 0, r = 2: max(-2, -1.2) = -1.2; A < 0, r = e^30: max(e^30, 1.2)
+    assert!((plain[0] + 1.2).abs() < 1e-6, "{plain:?}");
+    assert!(plain[1] > 1e12, "{plain:?}");
+    // A < 0, r = 0.5: max(0.5, 0.8) = 0.8
+    assert!((plain[2] - 0.8).abs() < 1e-6, "{plain:?}");
+    let (dual, ratio) = surrogate_per_sample(&lr, &adv, 0.2, Some(3.0));
+    let dual = v(&dual);
+    assert!((dual[0] + 1.2).abs() < 1e-6, "{dual:?}");
+    assert!((dual[1] - 3.0).abs() < 1e-6, "the bound -c A: {dual:?}");
+    assert!((dual[2] - 0.8).abs() < 1e-6, "{dual:?}");
+    // log-ratios are clamped to +-20 before exp
+    assert!((v(&ratio)[1] - 20f32.exp()).abs() / 20f32.exp() < 1e-5);
+    // the bound is a number above 1
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/specialist/flat.yaml");
+    let e = dreampolicy::rl::config::load(&path, &["ppo.dual_clip=0.5".into()])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("ppo.dual_clip"), "{e}");
+}
+
+#[test]
 fn walker_transfers_into_a_scan_encoder_policy_acting_the_same() {
     use dreampolicy::env::VecEnv;
     use dreampolicy::rl::{Agent, VecTask};

@@ -212,6 +212,14 @@ pub struct PpoConfig {
     /// the mirrored state and action).
     #[serde(default)]
     pub symmetry_ratio: SymmetryRatio,
+    /// Dual-clip PPO's bound `c` (Ye et al. 2020; 3 in their paper): a sample
+    /// with a negative advantage adds at most `-c A` to the loss, however large
+    /// its ratio, and log-ratios are clamped to +-20 before `exp`. None (the
+    /// default): plain PPO. A mirrored sample far in the tail of the current
+    /// policy (`symmetry_ratio: policy`) can reach ratios of e^30 within one
+    /// update; run uneven4 logged a gradient norm of 46 685 and then a NaN loss.
+    #[serde(default)]
+    pub dual_clip: Option<f64>,
 }
 
 /// How the mirrored half of a symmetry-augmented batch enters PPO's ratio.
@@ -248,6 +256,7 @@ impl Default for PpoConfig {
             symmetry: false,
             mirror_loss_coef: 0.0,
             symmetry_ratio: SymmetryRatio::Behavior,
+            dual_clip: None,
         }
     }
 }
@@ -391,6 +400,13 @@ impl PpoConfig {
         }
         if self.desired_kl.is_nan() || self.desired_kl <= 0.0 {
             return bad("ppo.desired_kl must be positive".into());
+        }
+        if let Some(c) = self.dual_clip {
+            if !(c.is_finite() && c > 1.0) {
+                return Err(ConfigError::Invalid(format!(
+                    "ppo.dual_clip must be a number above 1 (dual-clip PPO's c, e.g. 3), got {c}"
+                )));
+            }
         }
         if self.mirror_loss_coef.is_nan()
             || self.mirror_loss_coef < 0.0

@@ -83,6 +83,32 @@ fn mirror_norms(agent: &Agent) -> [Option<(Tensor, Tensor, f64)>; 3] {
     ]
 }
 
+/// PPO's clipped surrogate loss per sample (to minimize) and the ratios, from
+/// the log-ratios `log(pi / pi_old)` and advantages `adv`: `max(-A r, -A
+/// clip(r, 1 - eps, 1 + eps))`; with `dual_clip` `c`, log-ratios are clamped to
+/// +-20 and a sample with `A < 0` adds at most `-c A` (dual-clip PPO).
+pub fn surrogate_per_sample(
+    log_ratio: &Tensor,
+    adv: &Tensor,
+    clip: f64,
+    dual_clip: Option<f64>,
+) -> (Tensor, Tensor) {
+    let ratio = match dual_clip {
+        Some(_) => log_ratio.clamp(-20.0, 20.0).exp(),
+        None => log_ratio.exp(),
+    };
+    let surr = -(adv * &ratio);
+    let surr_clipped = -(adv * ratio.clamp(1.0 - clip, 1.0 + clip));
+    let mut per_sample = surr.max_other(&surr_clipped);
+    if let Some(dc) = dual_clip {
+        let bound = -(adv * dc);
+        per_sample = per_sample
+            .min_other(&bound)
+            .where_self(&adv.lt(0.0), &per_sample);
+    }
+    (per_sample, ratio)
+}
+
 fn tensor(v: &[f32], rows: i64) -> Tensor {
     Tensor::from_slice(v).view([rows, -1])
 }
@@ -226,11 +252,11 @@ impl Ppo {
                     self.adapt_lr(kl);
                 }
 
-                let ratio = (&logp - pick(&old_logp)).exp();
+                let log_ratio = &logp - pick(&old_logp);
                 let a = pick(&adv);
-                let surr = -(&a * &ratio);
-                let surr_clipped = -(&a * ratio.clamp(1.0 - c.clip_param, 1.0 + c.clip_param));
-                let surrogate = surr.max_other(&surr_clipped).mean(Kind::Float);
+                let (per_sample, ratio) =
+                    surrogate_per_sample(&log_ratio, &a, c.clip_param, c.dual_clip);
+                let surrogate = per_sample.mean(Kind::Float);
                 let ret = pick(&returns);
                 let value_loss = if c.clip_value {
                     let ov = pick(&old_values);
