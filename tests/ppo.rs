@@ -279,6 +279,28 @@ fn symmetry_augmentation_trains_the_g1_and_is_refused_for_the_cartpole() {
     assert!(e.contains("symmetry"), "{e}");
 }
 
+/// One PPO iteration fine-tuning the committed walker (8 envs x 8 steps, one
+/// minibatch, fixed rate) with `sets` on top, in `dir/name`: the first row's
+/// `col`.
+fn walker_iteration(dir: &Scratch, name: &str, sets: &[&str], col: &str) -> f64 {
+    let init = format!("train.init_checkpoint={}", common::walker_path().display());
+    let mut all = vec![
+        init.as_str(),
+        "env.n_envs=8",
+        "ppo.num_steps=8",
+        "ppo.num_minibatches=1",
+        "train.iterations=1",
+        "ppo.schedule=fixed",
+        // MuJoCo 2.2.2 (CI) has no implicitfast
+        "env.sim.integrator=implicit",
+    ];
+    all.extend_from_slice(sets);
+    let cfg = load_config("specialist/flat.yaml", &all);
+    let out = dir.0.join(name);
+    runner::train(&cfg, &out, false, true).unwrap();
+    column(&out, col)[0]
+}
+
 #[test]
 fn symmetry_augmentation_measures_kl_on_the_original_samples() {
     // The committed walker is not left/right symmetric: its mirrored actions are
@@ -288,31 +310,13 @@ fn symmetry_augmentation_measures_kl_on_the_original_samples() {
     // half too it read ~100 and the adaptive rate fell to its floor.
     let _t = torch_lock();
     let dir = Scratch::new("sym_kl");
-    let walker = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("models/checkpoints/flat/checkpoints/latest.pt");
-    let init = format!("train.init_checkpoint={}", walker.display());
-    let mut kls = Vec::new();
-    for sym in ["false", "true"] {
-        let sym = format!("ppo.symmetry={sym}");
-        let cfg = load_config(
-            "specialist/flat.yaml",
-            &[
-                &init,
-                &sym,
-                "env.n_envs=8",
-                "ppo.num_steps=8",
-                "ppo.num_epochs=2",
-                "ppo.num_minibatches=1",
-                "train.iterations=1",
-                "ppo.schedule=fixed",
-                // MuJoCo 2.2.2 (CI) has no implicitfast
-                "env.sim.integrator=implicit",
-            ],
-        );
-        let out = dir.0.join(&sym);
-        runner::train(&cfg, &out, false, true).unwrap();
-        kls.push(column(&out, "kl")[0]);
-    }
+    let kls: Vec<f64> = ["false", "true"]
+        .iter()
+        .map(|sym| {
+            let sym = format!("ppo.symmetry={sym}");
+            walker_iteration(&dir, &sym, &[&sym, "ppo.num_epochs=2"], "kl")
+        })
+        .collect();
     assert!(kls.iter().all(|k| k.is_finite()), "{kls:?}");
     assert!(
         kls[1] < 2.0 * kls[0] + 0.05,
@@ -329,31 +333,18 @@ fn mirrored_samples_start_at_ratio_one_with_the_policy_symmetry_ratio() {
     // clip range.
     let _t = torch_lock();
     let dir = Scratch::new("sym_ratio");
-    let walker = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("models/checkpoints/flat/checkpoints/latest.pt");
-    let init = format!("train.init_checkpoint={}", walker.display());
-    let mut clipped = Vec::new();
-    for ratio in ["behavior", "policy"] {
-        let set = format!("ppo.symmetry_ratio={ratio}");
-        let cfg = load_config(
-            "specialist/flat.yaml",
-            &[
-                &init,
-                &set,
-                "ppo.symmetry=true",
-                "env.n_envs=8",
-                "ppo.num_steps=8",
-                "ppo.num_epochs=1",
-                "ppo.num_minibatches=1",
-                "train.iterations=1",
-                "ppo.schedule=fixed",
-                "env.sim.integrator=implicit",
-            ],
-        );
-        let out = dir.0.join(ratio);
-        runner::train(&cfg, &out, false, true).unwrap();
-        clipped.push(column(&out, "clip_fraction")[0]);
-    }
+    let clipped: Vec<f64> = ["behavior", "policy"]
+        .iter()
+        .map(|ratio| {
+            let set = format!("ppo.symmetry_ratio={ratio}");
+            walker_iteration(
+                &dir,
+                ratio,
+                &[&set, "ppo.symmetry=true", "ppo.num_epochs=1"],
+                "clip_fraction",
+            )
+        })
+        .collect();
     assert!(clipped[0] > 0.2, "behavior: {clipped:?}");
     assert_eq!(clipped[1], 0.0, "policy: {clipped:?}");
 }
@@ -383,7 +374,12 @@ fn dual_clip_bounds_the_loss_of_negative_advantages_by_hand() {
     // the bound is a number above 1
     let path =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/specialist/flat.yaml");
-    let e = dreampolicy::rl::config::load(&path, &["ppo.dual_clip=0.5".into()])
+    // (implicit: MuJoCo 2.2.2, in CI, has no implicitfast)
+    let sets = [
+        "ppo.dual_clip=0.5".into(),
+        "env.sim.integrator=implicit".into(),
+    ];
+    let e = dreampolicy::rl::config::load(&path, &sets)
         .unwrap_err()
         .to_string();
     assert!(e.contains("ppo.dual_clip"), "{e}");
