@@ -48,12 +48,9 @@ pub struct EvalArgs {
     /// The level sweep's PNG (success and completion rate against level).
     #[arg(long, requires = "levels")]
     plot: Option<PathBuf>,
-    /// The table the lanes come from: `eval` (the config's eval.terrain, the
-    /// paper's table unless it says otherwise) or `training` (the checkpoint's
-    /// own curriculum, env.terrain.map: where its training level means what
-    /// the lane's level means).
-    #[arg(long, default_value = "eval", value_parser = ["eval", "training"])]
-    table: String,
+    /// The table the lanes come from.
+    #[arg(long, value_enum, default_value_t = eval::EvalTable::Eval)]
+    table: eval::EvalTable,
     #[arg(long, default_value_t = 0)]
     seed: u64,
     #[arg(long, default_value_t = 2)]
@@ -87,11 +84,7 @@ impl EvalArgs {
             seed: self.seed,
             threads: self.threads.max(1),
             level,
-            table: if self.table == "training" {
-                eval::EvalTable::Training
-            } else {
-                eval::EvalTable::Eval
-            },
+            table: self.table,
         }
     }
 }

@@ -94,7 +94,7 @@ pub struct EvalOptions {
 }
 
 /// Which terrain table an evaluation's lanes come from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum EvalTable {
     /// The config's `eval.terrain` (the paper's table unless it says

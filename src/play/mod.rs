@@ -219,6 +219,11 @@ fn check(o: &PlayOptions) -> Result<(), PlayError> {
 /// What `play` steps: the G1 env, or a unified policy's task around it, whose
 /// plan is drawn on `/plan`.
 trait PlayTask: crate::eval::EvalTask {
+    /// The world model that plans (a unified policy's), if any: its file has
+    /// `/plan`.
+    fn world_model(&self) -> Option<&str> {
+        None
+    }
     /// Env 0's plan in the world (a unified policy's), if it has one now.
     fn plan_poses(&mut self) -> Option<Vec<crate::unified::task::PlannedPose>> {
         None
@@ -228,6 +233,9 @@ trait PlayTask: crate::eval::EvalTask {
 impl PlayTask for VecEnv {}
 
 impl PlayTask for crate::unified::task::UnifiedTask {
+    fn world_model(&self) -> Option<&str> {
+        Some(&self.cfg.world_model)
+    }
     fn plan_poses(&mut self) -> Option<Vec<crate::unified::task::PlannedPose>> {
         self.plan_in_world(0)
     }
@@ -316,12 +324,12 @@ impl Rollout<'_> {
                 format!("dreampolicy {}", env!("CARGO_PKG_VERSION")),
             ),
         ]);
-        let unified = cfg.task == crate::rl::config::TaskKind::Unified;
-        if unified {
-            let u = crate::unified::config::UnifiedConfig::of(cfg).map_err(RlError::from)?;
-            metadata.insert("world_model".into(), u.world_model.clone());
+        let world_model = task.world_model().map(String::from);
+        let plans = world_model.is_some();
+        if let Some(wm) = world_model {
+            metadata.insert("world_model".into(), wm);
         }
-        let mut file = PlayFile::create(&o.out, metadata, &term_names, unified)?;
+        let mut file = PlayFile::create(&o.out, metadata, &term_names, plans)?;
 
         // the scene, once, at frame 0
         let t0 = Time::from_nanos(START_NS);

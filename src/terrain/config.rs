@@ -50,11 +50,6 @@ impl Curriculum {
         p0 + rng.random::<f64>() * (p1 - p0) * d
     }
 
-    /// [`Curriculum::sample`] rounded to the nearest integer (counts).
-    pub fn sample_count<R: Rng + ?Sized>(&self, d: f64, rng: &mut R) -> usize {
-        self.sample(d, rng).round().max(0.0) as usize
-    }
-
     /// The far end of the values possible at difficulty `d`: `p0 + (p1 - p0) * d`.
     pub fn bound(&self, d: f64) -> f64 {
         let [p0, p1] = self.0;

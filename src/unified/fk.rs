@@ -141,6 +141,11 @@ impl BodyFk {
         })
     }
 
+    /// The observation scales states are decoded with.
+    pub fn scales(&self) -> &ObsScales {
+        &self.scales
+    }
+
     /// The heading-frame bodies of a simulated robot's `qpos` and `qvel`.
     pub fn from_qpos(&mut self, qpos: &[f64], qvel: &[f64]) -> BodyFrames {
         self.data.qpos_mut().copy_from_slice(qpos);

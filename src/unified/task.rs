@@ -79,7 +79,6 @@ pub struct PlannedPose {
 
 pub struct UnifiedTask {
     env: VecEnv,
-    fk_scales: crate::env::config::ObsScales,
     wm: WorldModel,
     pub cfg: UnifiedConfig,
     fk: BodyFk,
@@ -149,7 +148,6 @@ impl UnifiedTask {
             fake: Vec::new(),
             sums: Sums::default(),
             env,
-            fk_scales: cfg.env.observation.scales.clone(),
             wm,
             cfg: u,
             fk,
@@ -209,7 +207,7 @@ impl UnifiedTask {
             return None;
         }
         let plan = plan.to_vec();
-        let sc = self.fk_scales.clone();
+        let sc = self.fk.scales().clone();
         let s = self.env.envs()[i].state();
         let mut pos = s.base_pos;
         let mut yaw = crate::env::state::rpy(&s.base_rot)[2];
