@@ -158,3 +158,44 @@ fn heading_mode_steers_the_yaw_rate() {
     let want = (0.5 * (1.0 - st.yaw)).clamp(-1.0, 1.0);
     assert!((st.command[2] - want).abs() < 1e-12);
 }
+
+/// Lane keeping (`commands.lane_lookahead`): the heading target turns towards
+/// the centre line of the lane through the spawn point, by pure pursuit.
+#[test]
+fn lane_keeping_turns_the_heading_towards_the_lane() {
+    use dreampolicy::env::locomotion::lane_correction;
+    // 0.5 m left of the lane, 1 m lookahead: turn right by atan(0.5)
+    assert!((lane_correction(0.5, 1.0) + 0.5f64.atan()).abs() < 1e-12);
+    assert!((lane_correction(-0.2, 0.5) - 0.4f64.atan()).abs() < 1e-12);
+    assert_eq!(lane_correction(0.0, 1.0), 0.0);
+    let c = cfg(&[
+        "env.n_envs=1",
+        "env.commands.heading_command=true",
+        "env.commands.heading=[0.4, 0.4]",
+        "env.commands.heading_stiffness=0.5",
+        "env.commands.ang_vel_yaw=[-1.0, 1.0]",
+        "env.commands.lane_lookahead=0.5",
+        "env.init.yaw=[0.0, 0.0]",
+    ]);
+    let mut v = VecEnv::new(&c.env).unwrap();
+    for _ in 0..25 {
+        v.step(&[0.0; NUM_JOINTS]);
+    }
+    let e = &v.envs()[0];
+    let (st, spawn, h) = (e.state(), e.spawn(), 0.4f64);
+    let (dx, dy) = (st.base_pos[0] - spawn[0], st.base_pos[1] - spawn[1]);
+    let lateral = -dx * h.sin() + dy * h.cos();
+    assert!(
+        lateral.abs() > 1e-4,
+        "the standing robot sways off its spawn point"
+    );
+    let target = st.heading_target.unwrap();
+    assert!((target - (h + lane_correction(lateral, 0.5))).abs() < 1e-12);
+    let want = (0.5 * (target - st.yaw)).clamp(-1.0, 1.0);
+    assert!((st.command[2] - want).abs() < 1e-12);
+    // a lookahead that is not positive is refused in one line
+    let mut bad = c.env.clone();
+    bad.commands.lane_lookahead = Some(0.0);
+    let msg = bad.validate().unwrap_err().to_string();
+    assert!(msg.contains("lane_lookahead"), "{msg}");
+}

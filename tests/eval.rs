@@ -29,6 +29,7 @@ fn opts(episodes: usize) -> EvalOptions {
         threads: 1,
         level: None,
         table: dreampolicy::eval::EvalTable::Eval,
+        lane_lookahead: None,
     }
 }
 
@@ -385,6 +386,23 @@ fn terrain_lanes_are_walked_and_episodes_spread_over_lanes() {
         "{}",
         r.completion_rate
     );
+    // lane keeping is the evaluation's choice, not the training config's: the
+    // report says which steering scored it
+    assert_eq!(r.lane_lookahead, None);
+    let mut cfg = ck.config().unwrap();
+    cfg.env.commands.lane_lookahead = Some(0.7);
+    let keep = EvalOptions {
+        lane_lookahead: Some(1.0),
+        ..o.clone()
+    };
+    use dreampolicy::eval::eval_env_config;
+    assert_eq!(eval_env_config(&cfg, &o).commands.lane_lookahead, None);
+    assert_eq!(
+        eval_env_config(&cfg, &keep).commands.lane_lookahead,
+        Some(1.0)
+    );
+    let r = evaluate(&ck, &keep).unwrap();
+    assert_eq!((r.episodes, r.lane_lookahead), (4, Some(1.0)));
 
     // a level the lanes' terrain table does not have is a clear config error
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/test/g1_tiny.yaml");

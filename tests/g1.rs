@@ -200,3 +200,43 @@ fn check_armature_names_the_joint_that_differs() {
     assert!(err.contains(JOINT_NAMES[3]), "{err}");
     assert!(err.contains("scripts/setup.sh"), "{err}");
 }
+
+/// `ref_stance_roll` narrows the reference pose's stance (hip roll in, ankle
+/// roll back): on the G1 the ankles come in by about 0.65 m x r each and the
+/// soles stay level, so the sign convention of the roll axes is right.
+#[test]
+fn stance_roll_narrows_the_feet_and_keeps_the_soles_level() {
+    use dreampolicy::env::rewards::{reference_leg_pose, RewardParams};
+    use dreampolicy::env::EnvState;
+    let (m, g1) = flat();
+    let mut d = Data::new(m.clone()).unwrap();
+    let feet_at = |d: &mut Data, r: f64| {
+        d.reset_keyframe(g1.stand_key).unwrap();
+        let mut s = EnvState::new(0.02, g1.default_pos, g1.joint_range);
+        s.gait_phase = 0.0; // both legs in the clock's stance (the right one is at 0.5)
+        let p = RewardParams {
+            ref_stance_roll: r,
+            ..Default::default()
+        };
+        let q = reference_leg_pose(&s, &p);
+        for (i, q) in q.iter().enumerate() {
+            d.qpos_mut()[g1.qpos_adr[i]] = *q;
+        }
+        d.kinematics();
+        let [l, r] = g1.feet.map(|b| (d.xpos()[b], d.xmat()[b]));
+        (l, r)
+    };
+    let (l0, r0) = feet_at(&mut d, 0.0);
+    let (l1, r1) = feet_at(&mut d, 0.06);
+    let (w0, w1) = (l0.0[1] - r0.0[1], l1.0[1] - r1.0[1]);
+    assert!(w0 > 0.2 && w0 < 0.26, "default stance {w0} m");
+    let narrowed = w0 - w1;
+    assert!(
+        (0.06..0.1).contains(&narrowed),
+        "0.06 rad of stance roll narrows by {narrowed} m ({w0} -> {w1})"
+    );
+    // the soles' normals (the ankle roll bodies' z axes) stay as level as in the default pose
+    for (a, b) in [(l0.1, l1.1), (r0.1, r1.1)] {
+        assert!((a[8] - b[8]).abs() < 1e-3, "sole tilt {} vs {}", a[8], b[8]);
+    }
+}

@@ -328,6 +328,28 @@ fn foot_lifting_terms_by_hand() {
     close(term("ref_joint_pos", &s), 1.0);
     s.q[3] += 0.3;
     close(term("ref_joint_pos", &s), (-0.6f64).exp() - 0.06);
+
+    // a narrowed stance: hip roll in (left -r, right +r), ankle roll back, and
+    // hip_pos measured against the same reference
+    let narrow = RewardParams {
+        ref_stance_roll: 0.06,
+        ..p.clone()
+    };
+    let q_n = reference_leg_pose(&s, &narrow);
+    let q_w = reference_leg_pose(&s, &p);
+    let diff: Vec<f64> = q_n.iter().zip(&q_w).map(|(a, b)| a - b).collect();
+    let mut want = [0.0; 12];
+    (want[1], want[5], want[7], want[11]) = (-0.06, 0.06, 0.06, -0.06);
+    for (d, w) in diff.iter().zip(want) {
+        close(*d, w);
+    }
+    s.q[..12].copy_from_slice(&q_n);
+    let hip = |s: &EnvState, p: &RewardParams| (lookup("hip_pos").unwrap().f)(s, p);
+    close(hip(&s, &narrow), 0.0);
+    close(hip(&s, &p), 2.0 * 0.06 * 0.06);
+    close((lookup("ref_joint_pos").unwrap().f)(&s, &narrow), 1.0);
+    s.q[..12].copy_from_slice(&q_w);
+    s.q[3] += 0.3;
     s.q[3] += 1.0;
     close(term("ref_joint_pos", &s), (-2.6f64).exp() - 0.1);
 

@@ -315,6 +315,7 @@ fn a_resumed_tiny_unified_run_is_bit_identical() {
             threads: 1,
             level: Some(0),
             table: dreampolicy::eval::EvalTable::Eval,
+            lane_lookahead: None,
         };
         let r = dreampolicy::eval::evaluate(&ca, &o).unwrap();
         assert_eq!(r.episodes, 2);

@@ -51,6 +51,10 @@ pub struct EvalArgs {
     /// The table the lanes come from.
     #[arg(long, value_enum, default_value_t = eval::EvalTable::Eval)]
     table: eval::EvalTable,
+    /// Lane keeping: steer the heading command at the lane's centre line this
+    /// many metres ahead (pure pursuit) instead of holding it along the lane.
+    #[arg(long, value_parser = positive_metres)]
+    lane_lookahead: Option<f64>,
     #[arg(long, default_value_t = 0)]
     seed: u64,
     #[arg(long, default_value_t = 2)]
@@ -85,6 +89,7 @@ impl EvalArgs {
             threads: self.threads.max(1),
             level,
             table: self.table,
+            lane_lookahead: self.lane_lookahead,
         }
     }
 }
@@ -280,4 +285,14 @@ fn eval_sweep(
         println!("{}", serde_json::to_string(&value)?);
     }
     Ok(())
+}
+
+/// A positive length in metres (clap value parser).
+pub(super) fn positive_metres(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(v) if v > 0.0 && v.is_finite() => Ok(v),
+        _ => Err(format!(
+            "expected a positive length in metres, got {text:?}"
+        )),
+    }
 }

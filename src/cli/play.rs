@@ -37,6 +37,10 @@ pub struct PlayArgs {
     /// solver) instead of the checkpoint's training scene.
     #[arg(long)]
     full_collision: bool,
+    /// Lane keeping: steer the heading at the lane's centre line this many
+    /// metres ahead, as `eval --lane-lookahead`.
+    #[arg(long, value_parser = super::eval::positive_metres)]
+    lane_lookahead: Option<f64>,
     /// libtorch threads.
     #[arg(long, default_value_t = 1)]
     threads: i32,
@@ -56,6 +60,7 @@ pub fn run(a: PlayArgs) -> Result<()> {
         speed: a.speed,
         seed: a.seed,
         full_collision: a.full_collision,
+        lane_lookahead: a.lane_lookahead,
         out: a.out.clone(),
     };
     let s = play::play(&ck, &opts).with_context(|| format!("playing into {}", a.out.display()))?;

@@ -277,6 +277,12 @@ pub struct CommandConfig {
     pub heading: [f64; 2],
     /// Planar commands below this norm are zeroed (standing is a command too).
     pub min_norm: f64,
+    /// Heading mode, lane keeping (pure pursuit): the heading target points at
+    /// the lane's centre line this far ahead (m), the lane being the line
+    /// through the spawn point along the drawn heading:
+    /// `target = heading + atan2(-lateral_offset, lane_lookahead)`. Unset: the
+    /// drawn heading alone, and a sideways drift is never steered back.
+    pub lane_lookahead: Option<f64>,
 }
 
 impl Default for CommandConfig {
@@ -290,6 +296,7 @@ impl Default for CommandConfig {
             ang_vel_yaw: [-1.0, 1.0],
             heading: [-std::f64::consts::PI, std::f64::consts::PI],
             min_norm: 0.2,
+            lane_lookahead: None,
         }
     }
 }
@@ -437,6 +444,13 @@ impl EnvConfig {
                 "env.episode_length_s must be positive, got {}",
                 self.episode_length_s
             ));
+        }
+        if let Some(l) = self.commands.lane_lookahead {
+            if l.is_nan() || l <= 0.0 {
+                return bad(format!(
+                    "env.commands.lane_lookahead must be positive (m) or left out, got {l}"
+                ));
+            }
         }
         self.rewards.validate()?;
         for (what, r) in [

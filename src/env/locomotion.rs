@@ -39,6 +39,8 @@ pub struct LocoEnv {
     actions: [[f64; NUM_JOINTS]; MAX_LATENCY + 1],
     latency: usize,
     pub(crate) spawn: [f64; 3],
+    /// The drawn heading (heading mode); the yaw target adds lane keeping.
+    heading: Option<f64>,
     pub(crate) level: usize,
     pub(crate) col: usize,
     pub(crate) episode_sums: Vec<f64>,
@@ -104,6 +106,7 @@ impl LocoEnv {
             actions: [[0.0; NUM_JOINTS]; MAX_LATENCY + 1],
             latency: 0,
             spawn: [0.0; 3],
+            heading: None,
             level,
             col,
             episode_sums: vec![0.0; sh.rewards.len()],
@@ -264,6 +267,7 @@ impl LocoEnv {
             (vx, vy)
         };
         self.state.command = [planar.0, planar.1, wz];
+        self.heading = heading;
         self.state.heading_target = heading;
     }
 
@@ -513,9 +517,21 @@ impl LocoEnv {
         s.terrain_level = self.level;
     }
 
-    /// Heading mode: yaw-rate command = clip(k * wrap(heading - yaw)).
+    /// Heading mode: yaw-rate command = clip(k * wrap(target - yaw)), the
+    /// target being the drawn heading, turned towards the lane's centre line
+    /// when `commands.lane_lookahead` is set.
     fn steer_heading(&mut self, sh: &EnvShared) {
         let c = &sh.cfg.commands;
+        self.state.heading_target = self.heading.map(|h| match c.lane_lookahead {
+            Some(l) => {
+                let (dx, dy) = (
+                    self.state.base_pos[0] - self.spawn[0],
+                    self.state.base_pos[1] - self.spawn[1],
+                );
+                h + lane_correction(-dx * h.sin() + dy * h.cos(), l)
+            }
+            None => h,
+        });
         if let Some(h) = self.state.heading_target {
             let w = c.heading_stiffness * wrap_angle(h - self.state.yaw);
             self.state.command[2] = w.clamp(c.ang_vel_yaw[0], c.ang_vel_yaw[1]);
@@ -579,4 +595,10 @@ pub fn next_level(level: usize, up: bool, down: bool, levels: usize, rng: &mut i
     } else {
         level
     }
+}
+
+/// Pure pursuit of a straight lane: the heading offset (rad) that points at the
+/// centre line `lookahead` metres ahead, from `lateral` metres left of it.
+pub fn lane_correction(lateral: f64, lookahead: f64) -> f64 {
+    (-lateral).atan2(lookahead.max(1e-6))
 }

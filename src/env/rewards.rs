@@ -13,7 +13,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::config::ConfigError;
 use crate::robot::{
-    HIP_ROLL_YAW, LEG_ANKLE_PITCH, LEG_HIP_PITCH, LEG_KNEE, NUM_JOINTS, UPPER_BODY,
+    HIP_ROLL_YAW, LEG_ANKLE_PITCH, LEG_ANKLE_ROLL, LEG_HIP_PITCH, LEG_HIP_ROLL, LEG_KNEE,
+    NUM_JOINTS, UPPER_BODY,
 };
 
 /// One reward term.
@@ -45,7 +46,7 @@ terms! {
     lin_vel_z: "v_z^2 (pelvis frame)";
     ang_vel_xy: "w_x^2 + w_y^2 (pelvis frame)";
     tracking_goal_vel: "min(v . v_cmd/|v_cmd|, |v_cmd|) / |v_cmd| over the planar command (0 when |v_cmd| < 0.05)";
-    hip_pos: "sum((q_hip - q_default)^2) over hip roll and yaw";
+    hip_pos: "sum((q_hip - q_default - stance offset)^2) over hip roll and yaw (the offset: ref_stance_roll on hip roll, 0 by default)";
     feet_stumble: "1 if a foot's horizontal contact force exceeds 4 |F_z|";
     feet_edge: "number of feet in contact on a terrain edge, when terrain level >= feet_edge_min_level";
     feet_parallel: "sum(pitch_foot^2), foot pitch in the world frame";
@@ -70,7 +71,7 @@ terms! {
     upright: "exp(-(g_x^2 + g_y^2) / upright_sigma): a bounded, positive orientation term (mjlab's upright)";
     feet_air_time_biped: "while exactly one foot is in contact and |v_cmd| > 0.1: min(time both feet have spent in their current mode, feet_air_time_threshold) (Isaac Lab's G1 feet_air_time_positive_biped)";
     foot_clearance: "exp(-sum_feet tanh(2 |v_xy(foot)|) (z_foot - ground - foot_clearance_target)^2 / clearance_sigma): only a foot that moves is asked to be high (Isaac Lab's velocity-weighted clearance)";
-    ref_joint_pos: "exp(-2 d) - 0.2 min(d, 0.5), d = ||q_legs - q_ref|| over the 12 leg joints; q_ref is the default pose plus, in each leg's clock swing, hip pitch -A sin(pi s), knee +2A sin(pi s), ankle pitch -A sin(pi s) (A = ref_swing_amplitude: the foot lifts and stays level; humanoid-gym's reference trajectory)";
+    ref_joint_pos: "exp(-2 d) - 0.2 min(d, 0.5), d = ||q_legs - q_ref|| over the 12 leg joints; q_ref is the default pose (hip and ankle roll turned by ref_stance_roll) plus, in each leg's clock swing, hip pitch -A sin(pi s), knee +2A sin(pi s), ankle pitch -A sin(pi s) (A = ref_swing_amplitude: the foot lifts and stays level; humanoid-gym's reference trajectory)";
     stand_still: "1 while a planar command of |v_cmd| > 0.2 m/s is given and the base moves along it at less than a quarter of it: standing in front of an obstacle must not pay";
     energy: "sum((tau_j qd_j / k_j)^2), k_j the joint's effort limit (the paper's energy consumption; its k_j is read as the effort limit, 0 without one)";
     dof_vel_limits: "sum(max(0, |qd_j| - 0.9 qd_max_j)), qd_max_j the motor's no-load speed (Unitree's specs)";
@@ -171,11 +172,22 @@ fn tracking_goal_vel(s: &EnvState, _: &RewardParams) -> f64 {
     along.min(n) / n
 }
 
-fn hip_pos(s: &EnvState, _: &RewardParams) -> f64 {
+fn hip_pos(s: &EnvState, p: &RewardParams) -> f64 {
     HIP_ROLL_YAW
         .iter()
-        .map(|&i| sq(s.q[i] - s.default_q[i]))
+        .map(|&i| sq(s.q[i] - s.default_q[i] - stance_roll(i, p)))
         .sum()
+}
+
+/// The reference pose's offset from the default pose at leg joint `i` (0..12)
+/// that narrows the stance (`ref_stance_roll`): hip roll in, ankle roll back.
+fn stance_roll(i: usize, p: &RewardParams) -> f64 {
+    let side = if i < 6 { -1.0 } else { 1.0 };
+    match i % 6 {
+        LEG_HIP_ROLL => side * p.ref_stance_roll,
+        LEG_ANKLE_ROLL => -side * p.ref_stance_roll,
+        _ => 0.0,
+    }
 }
 
 fn feet_stumble(s: &EnvState, _: &RewardParams) -> f64 {
@@ -417,7 +429,9 @@ fn feet_swing_clock(s: &EnvState, p: &RewardParams) -> f64 {
 /// along a half sine (`ref_joint_pos`).
 pub fn reference_leg_pose(s: &EnvState, p: &RewardParams) -> [f64; 12] {
     let mut q = [0.0; 12];
-    q.copy_from_slice(&s.default_q[..12]);
+    for (i, q) in q.iter_mut().enumerate() {
+        *q = s.default_q[i] + stance_roll(i, p);
+    }
     for k in 0..2 {
         if let Some(lift) = swing_lift(s.gait_phase, k, p.gait_stance_ratio) {
             let a = p.ref_swing_amplitude * lift;
@@ -574,6 +588,12 @@ pub struct RewardParams {
     /// Hip-pitch flexion at mid-swing of `ref_joint_pos`'s reference (rad; the
     /// knee flexes twice this, the ankle pitch as much as the hip).
     pub ref_swing_amplitude: f64,
+    /// Stance narrowing of the reference pose (rad): `ref_joint_pos`'s reference
+    /// and `hip_pos`'s target adduct each hip roll by this much (left -r, right
+    /// +r; the G1's roll axes point forward) and roll each ankle back by as much,
+    /// so the sole stays level. The feet come in by about 0.65 m x r each (0:
+    /// the default pose's 0.24 m between the ankles).
+    pub ref_stance_roll: f64,
 }
 
 impl Default for RewardParams {
@@ -594,6 +614,7 @@ impl Default for RewardParams {
             ankle_stance_height: 0.036,
             swing_clock_height: 0.10,
             ref_swing_amplitude: 0.3,
+            ref_stance_roll: 0.0,
         }
     }
 }

@@ -60,6 +60,9 @@ pub struct EvalReport {
     pub level: Option<usize>,
     /// The table the lanes were drawn from (None for flat lanes).
     pub table: Option<EvalTable>,
+    /// The steering's lane-keeping lookahead (m); None: heading held along
+    /// the lane.
+    pub lane_lookahead: Option<f64>,
     pub full_collision: bool,
     pub checkpoint: String,
     pub checkpoint_iteration: usize,
@@ -91,6 +94,10 @@ pub struct EvalOptions {
     pub level: Option<usize>,
     /// The table the lanes are drawn from.
     pub table: EvalTable,
+    /// Lane keeping: the heading command points at the lane's centre line this
+    /// far ahead (m, `env.commands.lane_lookahead`); `None` holds the heading
+    /// along the lane, and a sideways drift is not steered back.
+    pub lane_lookahead: Option<f64>,
 }
 
 /// Which terrain table an evaluation's lanes come from.
@@ -123,6 +130,7 @@ pub fn eval_env_config(cfg: &ExperimentConfig, o: &EvalOptions) -> EnvConfig {
     c.heading = [0.0, 0.0];
     c.resample_time_s = e.time_limit_s * 2.0;
     c.min_norm = 0.0;
+    c.lane_lookahead = o.lane_lookahead;
     if o.full_collision {
         let d = crate::env::config::SimConfig::default();
         env.sim.collision = CollisionMode::Full;
@@ -206,6 +214,7 @@ pub fn evaluate_in(
         lane_length: length,
         level: (o.terrain != TerrainKind::Flat).then_some(level),
         table: (o.terrain != TerrainKind::Flat).then_some(o.table),
+        lane_lookahead: o.lane_lookahead,
         full_collision: o.full_collision,
         checkpoint: ck.path.display().to_string(),
         checkpoint_iteration: ck.meta.iteration,

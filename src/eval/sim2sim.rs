@@ -215,6 +215,7 @@ pub fn run_cells(
         threads,
         level: c.level,
         table: EvalTable::Eval,
+        lane_lookahead: None,
     };
     let base = eval_env_config(cfg, &o);
     let build = this_build();

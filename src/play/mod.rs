@@ -98,6 +98,8 @@ pub struct PlayOptions {
     /// The project's default scene (full collisions, default solver) instead of
     /// the checkpoint's training scene.
     pub full_collision: bool,
+    /// Lane keeping, as `eval --lane-lookahead` (m; None: heading held).
+    pub lane_lookahead: Option<f64>,
     /// The MCAP file to write.
     pub out: PathBuf,
 }
@@ -112,6 +114,7 @@ impl PlayOptions {
             speed: None,
             seed: 0,
             full_collision: false,
+            lane_lookahead: None,
             out: out.into(),
         }
     }
@@ -184,6 +187,7 @@ pub fn play_env_config(cfg: &ExperimentConfig, o: &PlayOptions, speed: f64) -> E
     c.heading = [0.0, 0.0];
     c.resample_time_s = 2.0 * env.episode_length_s;
     c.min_norm = 0.0;
+    c.lane_lookahead = o.lane_lookahead;
     if o.full_collision {
         let d = SimConfig::default();
         env.sim.collision = CollisionMode::Full;
@@ -316,6 +320,10 @@ impl Rollout<'_> {
             ("seconds".into(), o.seconds.to_string()),
             ("seed".into(), o.seed.to_string()),
             ("full_collision".into(), o.full_collision.to_string()),
+            (
+                "lane_lookahead".into(),
+                o.lane_lookahead.map_or("none".into(), |l| l.to_string()),
+            ),
             ("start_ns".into(), START_NS.to_string()),
             ("control_dt".into(), dt.to_string()),
             ("mujoco_version".into(), crate::sim::mujoco_version()),

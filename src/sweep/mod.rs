@@ -753,6 +753,7 @@ fn evaluate_run(
             threads,
             level: e.level,
             table: crate::eval::EvalTable::Eval,
+            lane_lookahead: None,
         },
     )
     .map_err(|err| format!("eval: {err}"))?;
