@@ -76,8 +76,8 @@ class Policy:
         self.w = np.load(os.path.join(bundle_dir, spec["file"]))
         self.spec = spec
         self.act = act_fn(spec["activation"])
-        if spec["history"] == "gru":
-            raise SystemExit("the NumPy deployer runs MLP histories only; "
+        if spec["history"] == "gru" or spec.get("scan_encoder", "mlp") == "gru":
+            raise SystemExit("the NumPy deployer runs MLP encoders only; "
                              "use `dreampolicy deploy-sim` for a GRU policy")
 
     def norm(self, x, kind):

@@ -15,7 +15,7 @@
 //! * [`data`] the expert dataset: MCAP shards of frames, windows, split, shuffle, stats
 //! * [`checkpoint`] checkpoint files shared by the trainers: named tensors + a JSON record, written atomically
 //! * [`seal`] SHA-256 seals inside the YAML and JSON files a later run trusts (config.yaml, deploy.yaml, stats.json)
-//! * [`run`] run directories (config.yaml, metrics.csv, log.txt) and progress bars
+//! * [`run`] run directories (config.yaml, metrics.csv and its TensorBoard event file, log.txt) and progress bars
 //! * [`plot`] PNG training curves (a grid of line-chart panels) from a metrics CSV
 //! * [`collect`] the expert dataset's collection: specialists rolled out into MCAP shards
 //! * [`bench`] the `dreampolicy bench ...` measurements

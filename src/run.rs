@@ -1,7 +1,8 @@
 //! Run directories and progress: what every long job writes and shows.
 //!
 //! A run directory holds `config.yaml` (the resolved config), `metrics.csv` (one
-//! row per logging step, header first), `log.txt`, `checkpoints/latest.pt` (the
+//! row per logging step, header first), for a trainer the same scalars as a
+//! TensorBoard event file ([`tensorboard`]), `log.txt`, `checkpoints/latest.pt` (the
 //! resume checkpoint) and `checkpoints/iter_NNNNNN.pt` (kept copies). Progress is an `indicatif`
 //! bar with rate and ETA on a terminal; with `--quiet` or when stderr is not a
 //! terminal it falls back to plain log lines.
@@ -11,6 +12,8 @@ use std::path::{Path, PathBuf};
 
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
+
+pub mod tensorboard;
 
 /// Errors around a run directory.
 #[derive(Debug, thiserror::Error)]
@@ -67,6 +70,8 @@ pub struct RunDir {
     metrics: BufWriter<File>,
     columns: Vec<String>,
     log: BufWriter<File>,
+    /// The event file, once [`RunDir::start_tensorboard`] started it.
+    events: Option<tensorboard::EventWriter>,
 }
 
 impl RunDir {
@@ -96,6 +101,7 @@ impl RunDir {
             metrics,
             columns: columns.iter().map(|c| c.to_string()).collect(),
             log: BufWriter::new(log),
+            events: None,
         })
     }
 
@@ -133,7 +139,25 @@ impl RunDir {
         &self.path
     }
 
-    /// Append one metrics row (same order as the columns) and flush it.
+    /// Write every metrics row from now on into a TensorBoard event file as
+    /// well (what every trainer does; [`tensorboard`]). The new file starts
+    /// with the rows `metrics.csv` holds now (after [`RunDir::resume`]: the
+    /// rows up to the checkpoint, at the wall times the old event files gave
+    /// them), and replaces every older event file of the directory, so that a
+    /// resumed run logs no step twice. Returns the file's path.
+    pub fn start_tensorboard(&mut self) -> Result<PathBuf, RunError> {
+        let mpath = self.path.join("metrics.csv");
+        self.metrics.flush().map_err(io(&mpath))?;
+        let text = std::fs::read_to_string(&mpath).map_err(io(&mpath))?;
+        let rows: Vec<&str> = text.lines().skip(1).collect();
+        let w = tensorboard::EventWriter::start(&self.path, &self.columns, &rows)?;
+        let path = w.path().to_path_buf();
+        self.events = Some(w);
+        Ok(path)
+    }
+
+    /// Append one metrics row (same order as the columns) and flush it, and its
+    /// event once [`RunDir::start_tensorboard`] was called.
     pub fn metrics_row(&mut self, values: &[f64]) -> Result<(), RunError> {
         if values.len() != self.columns.len() {
             return Err(RunError::Columns {
@@ -144,7 +168,11 @@ impl RunDir {
         let row: Vec<String> = values.iter().map(|v| format!("{v}")).collect();
         let mpath = self.path.join("metrics.csv");
         writeln!(self.metrics, "{}", row.join(",")).map_err(io(&mpath))?;
-        self.metrics.flush().map_err(io(&mpath))
+        self.metrics.flush().map_err(io(&mpath))?;
+        match &mut self.events {
+            Some(w) => w.row(values),
+            None => Ok(()),
+        }
     }
 
     /// Append a line to `log.txt`.

@@ -248,6 +248,27 @@ fn a_resumed_tiny_unified_run_is_bit_identical() {
     half.train.iterations = cfg.train.save_interval;
     dreampolicy::unified::train(&half, &b.0, false, true).unwrap();
     dreampolicy::unified::train(&cfg, &b.0, true, true).unwrap();
+    // the resumed run's TensorBoard file: one, each step once, the unified
+    // columns tagged, the values of metrics.csv's last row
+    let files = dreampolicy::run::tensorboard::event_files(&b.0).unwrap();
+    assert_eq!(files.len(), 1, "{files:?}");
+    let events = dreampolicy::run::tensorboard::read_events(&files[0]).unwrap();
+    let steps: Vec<i64> = events[1..].iter().map(|e| e.step).collect();
+    assert_eq!(steps, [1, 2, 3, 4]);
+    let text = std::fs::read_to_string(b.0.join("metrics.csv")).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let row: Vec<&str> = text.lines().last().unwrap().split(',').collect();
+    for (column, tag) in [
+        ("amp_loss", "Loss/amp_loss"),
+        ("track_pos", "Episode/track_pos"),
+    ] {
+        let cell: f64 = row[header.iter().position(|h| *h == column).unwrap()]
+            .parse()
+            .unwrap();
+        let e = events.last().unwrap();
+        let v = e.scalars.iter().find(|(t, _)| t == tag).map(|(_, v)| *v);
+        assert_eq!(v, Some(cell as f32), "{tag}");
+    }
     let rows = |dir: &std::path::Path| -> (Vec<String>, Vec<Vec<String>>) {
         let text = std::fs::read_to_string(dir.join("metrics.csv")).unwrap();
         let mut lines = text.lines();
@@ -509,27 +530,10 @@ fn exported_bundle_runs_the_inference_loop(
 #[test]
 fn the_foundation_transfers_into_the_unified_policy_acting_the_same() {
     let _t = torch_lock();
-    use dreampolicy::rl::checkpoint::Checkpoint;
-    use dreampolicy::rl::{Agent, VecTask};
-    use dreampolicy::unified::task::UnifiedTask;
+    use dreampolicy::rl::VecTask;
     let cfg = common::load_config("unified/small.yaml", &["env.n_envs=3"]);
-    let ck = Checkpoint::read(std::path::Path::new(
-        &cfg.train.init_checkpoint.clone().unwrap(),
-    ))
-    .unwrap();
-    let mut task = UnifiedTask::new(&cfg).unwrap();
+    let (mut task, mut old, mut new, t) = common::foundation_into_unified(&cfg);
     assert_eq!(task.dims().scan, 8 * OBS_DIM);
-    let n = task.n_envs();
-    let old_cfg = ck.config().unwrap();
-    // the foundation's own dims (scandots it never read)
-    let old_dims = dreampolicy::rl::TaskDims {
-        scan: dreampolicy::env::obs::SCAN_DIM,
-        ..task.dims()
-    };
-    let mut old = Agent::new(&old_cfg.policy, old_dims, n, true);
-    ck.load_agent(&mut old).unwrap();
-    let mut new = Agent::new(&cfg.policy, task.dims(), n, true);
-    let t = ck.transfer_agent(&mut new).unwrap();
     assert_eq!(t.widened, ["actor.0.weight", "critic.0.weight"]);
     common::assert_acts_alike(&mut old, &mut new, &mut task, 6);
     // the plans are fed: finite, and not all the same

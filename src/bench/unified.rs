@@ -1,14 +1,15 @@
 //! `bench unified`: PPO iterations with the world model in the loop (the
 //! unified task), their env-steps/s and the world model's share of them, beside
 //! the same iterations of the bare G1 env measured in the same run (the same
-//! env, policy sizes and PPO; the policy reads scandots instead of the plan).
+//! env, policy sizes and PPO; the policy reads scandots instead of the plan,
+//! through the config's MLP sizes when the future encoder is a GRU).
 use std::time::Instant;
 
 use serde::Serialize;
 
 use crate::env::task::VecTask;
 use crate::env::VecEnv;
-use crate::rl::config::{ExperimentConfig, TaskKind};
+use crate::rl::config::{ExperimentConfig, ScanEncoderKind, TaskKind};
 use crate::rl::runner::Trainer;
 use crate::rl::RlError;
 use crate::unified::config::UnifiedConfig;
@@ -27,6 +28,8 @@ pub struct UnifiedBench {
     pub guidance: f64,
     pub world_model_history: usize,
     pub world_model_horizon: usize,
+    /// `mlp` or `gru` (`policy.scan_encoder.kind`): the future encoder.
+    pub future_encoder: String,
     pub iterations: usize,
     /// Env-steps per second of whole iterations with the world model in the loop.
     pub env_steps_per_s: f64,
@@ -113,6 +116,7 @@ pub fn bench_unified(
     let mut base = cfg.clone();
     base.task = TaskKind::G1;
     base.unified = None;
+    base.policy.scan_encoder.kind = ScanEncoderKind::Mlp;
     let mut env = VecEnv::new(&base.env)?;
     let bare = time_iterations(&base, &mut env, warmup, iterations)?;
     let sps = uni.steps / uni.wall;
@@ -128,6 +132,7 @@ pub fn bench_unified(
         guidance: u.sampling.guidance,
         world_model_history: k,
         world_model_horizon: h,
+        future_encoder: format!("{:?}", cfg.policy.scan_encoder.kind).to_lowercase(),
         iterations,
         env_steps_per_s: sps,
         share_world_model: uni.wm / uni.wall,

@@ -216,7 +216,7 @@ impl Checkpoint {
             ));
         }
         let scan_out = if agent.policy.uses_scan() {
-            *agent.policy.cfg.scan_encoder.dims.last().unwrap_or(&0)
+            agent.policy.cfg.scan_encoder.latent()
         } else {
             0
         };

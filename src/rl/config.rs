@@ -156,12 +156,21 @@ pub enum HistoryKind {
     Gru,
 }
 
-/// The scandot encoder `E_scan` (MLP over the 187 heights).
+/// The scandot encoder `E_scan` (an MLP over the 187 heights), which is also
+/// the unified policy's future encoder `E_future` (over the plan's states).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ScanEncoderConfig {
     pub enabled: bool,
+    /// MLP sizes (`kind: mlp`); the last is the latent size.
     pub dims: Vec<i64>,
+    pub kind: ScanEncoderKind,
+    /// `kind: gru`: floats per step of the sequence (the input is read as
+    /// `scan / step` steps of `step` floats, in order): 98 for the unified
+    /// policy's plan of states, 17 for the scandots' rows.
+    pub step: usize,
+    /// `kind: gru`: hidden size, the latent size.
+    pub gru_hidden: i64,
 }
 
 impl Default for ScanEncoderConfig {
@@ -169,8 +178,47 @@ impl Default for ScanEncoderConfig {
         ScanEncoderConfig {
             enabled: true,
             dims: vec![128, 64, 32],
+            kind: ScanEncoderKind::Mlp,
+            step: 0,
+            gru_hidden: 64,
         }
     }
+}
+
+impl ScanEncoderConfig {
+    /// The latent size the encoder gives the actor and the critic.
+    pub fn latent(&self) -> i64 {
+        match self.kind {
+            ScanEncoderKind::Mlp => *self.dims.last().unwrap_or(&0),
+            ScanEncoderKind::Gru => self.gru_hidden,
+        }
+    }
+
+    /// Whether it reads an input of `scan` floats: a GRU's step must divide it.
+    pub fn check_input(&self, scan: usize) -> Result<(), ConfigError> {
+        if self.enabled
+            && scan > 0
+            && self.kind == ScanEncoderKind::Gru
+            && !scan.is_multiple_of(self.step)
+        {
+            return Err(ConfigError::Invalid(format!(
+                "policy.scan_encoder.step {} does not divide the task's scan input of {scan} floats \
+                 (the unified policy's plan: future_states x 98; scandots: 11 rows of 17)",
+                self.step
+            )));
+        }
+        Ok(())
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ScanEncoderKind {
+    /// MLP over the whole input.
+    Mlp,
+    /// GRU over the input's steps (the paper's RNN future encoder); its last
+    /// hidden state is the latent.
+    Gru,
 }
 
 /// PPO hyperparameters (paper table; rsl_rl's names).
@@ -368,6 +416,13 @@ impl PolicyConfig {
         }
         if self.history.gru_hidden <= 0 {
             return bad("policy.history.gru_hidden must be positive".into());
+        }
+        let se = &self.scan_encoder;
+        if se.kind == ScanEncoderKind::Gru && (se.step == 0 || se.gru_hidden <= 0) {
+            return bad(format!(
+                "policy.scan_encoder.kind gru needs a positive step (floats per step) and gru_hidden, got {} and {}",
+                se.step, se.gru_hidden
+            ));
         }
         if !(self.init_std > 0.0 && self.min_std > 0.0 && self.min_std <= self.init_std) {
             return bad(format!(

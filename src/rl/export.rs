@@ -118,6 +118,10 @@ pub struct NpzPolicy {
     /// scan_actor(scan), obs]`; its last layer has no activation.
     pub hist_layers: usize,
     pub scan_layers: usize,
+    /// `mlp` or `gru` (the NumPy deployer runs `mlp`; a GRU scan encoder's
+    /// weights are `scan_actor.{weight,bias}_{ih,hh}_l0`).
+    #[serde(default = "mlp_name")]
+    pub scan_encoder: String,
     pub actor_layers: usize,
     /// Inputs are normalized as `clip((x - mean) / std, -clip, clip)` with the
     /// arrays `obs_mean`, `obs_std` (history entries too) and `scan_mean`,
@@ -125,6 +129,10 @@ pub struct NpzPolicy {
     pub normalize: bool,
     pub obs_clip: f64,
     pub scan_clip: f64,
+}
+
+fn mlp_name() -> String {
+    "mlp".into()
 }
 
 /// Write the checkpoint's actor as NumPy arrays (`.npz`), for deployers without
@@ -177,6 +185,7 @@ pub fn export_npz(ck: &Checkpoint, out: &Path) -> Result<NpzPolicy, RlError> {
         },
         hist_layers,
         scan_layers: if uses_scan { scan_layers } else { 0 },
+        scan_encoder: format!("{:?}", pc.scan_encoder.kind).to_lowercase(),
         actor_layers,
         normalize: agent.normalize,
         obs_clip: agent.obs_norm.clip as f64,

@@ -1,5 +1,6 @@
 //! What a PPO run logs: the `metrics.csv` columns (the fixed ones, then one
-//! `rew_<term>` per reward term) and the panels of `plots/training.png`.
+//! `rew_<term>` per reward term; the event file's tags are
+//! `crate::run::tensorboard::tag` of them) and the panels of `plots/training.png`.
 use std::path::{Path, PathBuf};
 
 use crate::env::task::VecTask;

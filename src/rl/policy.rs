@@ -10,7 +10,7 @@
 use tch::nn::{self, Module, RNN};
 use tch::{Kind, Tensor};
 
-use crate::rl::config::{Activation, HistoryKind, PolicyConfig};
+use crate::rl::config::{Activation, HistoryKind, PolicyConfig, ScanEncoderKind};
 
 use crate::env::task::TaskDims;
 
@@ -20,8 +20,8 @@ pub struct ActorCritic {
     pub cfg: PolicyConfig,
     pub dims: TaskDims,
     hist: HistEncoder,
-    scan_actor: Option<nn::Sequential>,
-    scan_critic: Option<nn::Sequential>,
+    scan_actor: Option<SeqEncoder>,
+    scan_critic: Option<SeqEncoder>,
     actor: nn::Sequential,
     critic: nn::Sequential,
     log_std: Tensor,
@@ -31,6 +31,67 @@ enum HistEncoder {
     None,
     Mlp(nn::Sequential),
     Gru(nn::GRU),
+}
+
+/// The scan (or future) encoder: an MLP over the whole input, or a GRU over
+/// its `steps` steps of `step` floats.
+enum SeqEncoder {
+    Mlp(nn::Sequential),
+    Gru {
+        gru: nn::GRU,
+        steps: i64,
+        step: i64,
+        hidden: i64,
+    },
+}
+
+impl SeqEncoder {
+    fn new(p: nn::Path, input: i64, cfg: &PolicyConfig) -> SeqEncoder {
+        let se = &cfg.scan_encoder;
+        match se.kind {
+            ScanEncoderKind::Mlp => SeqEncoder::Mlp(mlp(p, input, &se.dims, None, cfg.activation)),
+            ScanEncoderKind::Gru => {
+                let step = se.step.max(1) as i64;
+                let c = nn::RNNConfig {
+                    batch_first: true,
+                    ..Default::default()
+                };
+                SeqEncoder::Gru {
+                    gru: nn::gru(p, step, se.gru_hidden, c),
+                    steps: input / step,
+                    step,
+                    hidden: se.gru_hidden,
+                }
+            }
+        }
+    }
+
+    fn forward(&self, x: &Tensor) -> Tensor {
+        match self {
+            SeqEncoder::Mlp(m) => m.forward(x),
+            SeqEncoder::Gru {
+                gru,
+                steps,
+                step,
+                hidden,
+            } => gru_last(gru, &x.reshape([-1, *steps, *step]), *hidden),
+        }
+    }
+}
+
+/// The last hidden state of `gru` over `seq` `[B, T, in]` from a zero state
+/// shaped from the input, so that a traced (exported) policy keeps a free batch
+/// size.
+fn gru_last(gru: &nn::GRU, seq: &Tensor, hidden: i64) -> Tensor {
+    let h0 = seq
+        .select(1, 0)
+        .narrow(1, 0, 1)
+        .zeros_like()
+        .repeat([1, hidden])
+        .unsqueeze(0);
+    let t = seq.size()[1];
+    let (out, _) = gru.seq_init(seq, &nn::GRUState(h0));
+    out.select(1, t - 1)
 }
 
 fn act(a: Activation) -> impl Fn(&Tensor) -> Tensor + Send {
@@ -99,15 +160,14 @@ impl ActorCritic {
             }
         };
         let use_scan = cfg.scan_encoder.enabled && dims.scan > 0;
-        let sd = &cfg.scan_encoder.dims;
         let scan_out = if use_scan {
-            *sd.last().unwrap_or(&0)
+            cfg.scan_encoder.latent()
         } else {
             0
         };
-        let scan_actor = use_scan.then(|| mlp(&root / "scan_actor", dims.scan as i64, sd, None, a));
-        let scan_critic =
-            use_scan.then(|| mlp(&root / "scan_critic", dims.scan as i64, sd, None, a));
+        let scan = dims.scan as i64;
+        let scan_actor = use_scan.then(|| SeqEncoder::new(&root / "scan_actor", scan, cfg));
+        let scan_critic = use_scan.then(|| SeqEncoder::new(&root / "scan_critic", scan, cfg));
         let actor = mlp(
             &root / "actor",
             hist_out + scan_out + obs,
@@ -172,17 +232,7 @@ impl ActorCritic {
             HistEncoder::Mlp(m) => parts.push(m.forward(&actor_in.narrow(1, 0, k * obs))),
             HistEncoder::Gru(g) => {
                 let seq = actor_in.narrow(1, 0, k * obs).reshape([-1, k, obs]);
-                // zero initial state shaped from the input, so that a traced
-                // (exported) policy keeps a free batch size
-                let h = self.cfg.history.gru_hidden;
-                let h0 = seq
-                    .select(1, 0)
-                    .narrow(1, 0, 1)
-                    .zeros_like()
-                    .repeat([1, h])
-                    .unsqueeze(0);
-                let (out, _) = g.seq_init(&seq, &nn::GRUState(h0));
-                parts.push(out.select(1, k - 1));
+                parts.push(gru_last(g, &seq, self.cfg.history.gru_hidden));
             }
         }
         if let (Some(enc), Some(s)) = (&self.scan_actor, scan) {
@@ -190,6 +240,12 @@ impl ActorCritic {
         }
         parts.push(cur);
         self.actor.forward(&Tensor::cat(&parts, 1))
+    }
+
+    /// The actor's scan (or future) latent of normalized scan rows `[B, scan]`
+    /// (None without a scan encoder).
+    pub fn scan_latent(&self, scan: &Tensor) -> Option<Tensor> {
+        self.scan_actor.as_ref().map(|e| e.forward(scan))
     }
 
     /// Value `[B]` from critic rows and scandots.

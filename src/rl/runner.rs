@@ -103,6 +103,7 @@ impl<'a, T: VecTask> Trainer<'a, T> {
         tch::set_num_threads(cfg.train.torch_threads as i32);
         tch::manual_seed(cfg.train.seed as i64);
         let n = task.n_envs();
+        cfg.policy.scan_encoder.check_input(task.dims().scan)?;
         let mut agent = Agent::new(&cfg.policy, task.dims(), n, cfg.ppo.normalize_obs);
         let init = match (&cfg.train.init_checkpoint, resume) {
             (Some(path), None) => Some(Checkpoint::read(Path::new(path))?),
@@ -530,8 +531,8 @@ pub fn train(
 }
 
 /// Train `task` in `run_dir` (fresh, or resumed from the run's latest
-/// checkpoint when `resume`): the run directory, metrics, checkpoints and
-/// summary every trainer shares.
+/// checkpoint when `resume`): the run directory, metrics (`metrics.csv` and the
+/// TensorBoard event file), checkpoints and summary every trainer shares.
 pub fn train_task<T: VecTask>(
     cfg: &ExperimentConfig,
     task: &mut T,
@@ -548,6 +549,8 @@ pub fn train_task<T: VecTask>(
     } else {
         (RunDir::create(run_dir, cfg, &cols)?, None)
     };
+    let events = run.start_tensorboard()?;
+    run.log(&format!("tensorboard: {}", events.display()))?;
     let s = learn(cfg, task, &mut run, ck.as_ref(), quiet)?;
     run.log(&format!(
         "summary {}",

@@ -32,6 +32,9 @@ pub fn train(
     resume: bool,
     quiet: bool,
 ) -> Result<TrainSummary, RlError> {
+    // the task plans with the world model as it starts: on the run's thread
+    // count already, or its first plans differ from a resumed run's
+    tch::set_num_threads(cfg.train.torch_threads as i32);
     let mut task = task::UnifiedTask::new(cfg)?;
     train_task(cfg, &mut task, run_dir, resume, quiet)
 }

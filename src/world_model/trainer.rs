@@ -574,7 +574,8 @@ pub fn plot_run(run_dir: &Path) -> Result<PathBuf, crate::plot::PlotError> {
 }
 
 /// Train the config in `run_dir` (fresh, or resumed from the run's latest
-/// checkpoint when `resume`).
+/// checkpoint when `resume`); `metrics.csv` rows go into a TensorBoard event
+/// file too (`run::tensorboard`).
 pub fn train(
     cfg: &WorldModelConfig,
     run_dir: &Path,
@@ -588,6 +589,8 @@ pub fn train(
     } else {
         (RunDir::create(run_dir, cfg, &COLUMNS)?, None)
     };
+    let events = run.start_tensorboard()?;
+    run.log(&format!("tensorboard: {}", events.display()))?;
     let s = learn(cfg, &mut run, ck.as_ref(), quiet)?;
     run.log(&format!(
         "summary {}",

@@ -137,3 +137,35 @@ pub fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
         .map(|(x, y)| (x - y).abs())
         .fold(0.0, f32::max)
 }
+
+/// The unified task of `cfg` (its `unified/small.yaml` start: the foundation
+/// named by `train.init_checkpoint`), the foundation as it was saved (its own
+/// dims: scandots it never read) and the configured unified policy transferred
+/// from it: `(task, old, new, transfer)`.
+pub fn foundation_into_unified(
+    cfg: &dreampolicy::rl::config::ExperimentConfig,
+) -> (
+    dreampolicy::unified::task::UnifiedTask,
+    dreampolicy::rl::Agent,
+    dreampolicy::rl::Agent,
+    dreampolicy::rl::checkpoint::Transfer,
+) {
+    use dreampolicy::rl::checkpoint::Checkpoint;
+    use dreampolicy::rl::{Agent, VecTask};
+    let ck = Checkpoint::read(std::path::Path::new(
+        &cfg.train.init_checkpoint.clone().unwrap(),
+    ))
+    .unwrap();
+    let task = dreampolicy::unified::task::UnifiedTask::new(cfg).unwrap();
+    let n = task.n_envs();
+    let old_cfg = ck.config().unwrap();
+    let old_dims = dreampolicy::rl::TaskDims {
+        scan: dreampolicy::env::obs::SCAN_DIM,
+        ..task.dims()
+    };
+    let mut old = Agent::new(&old_cfg.policy, old_dims, n, true);
+    ck.load_agent(&mut old).unwrap();
+    let mut new = Agent::new(&cfg.policy, task.dims(), n, true);
+    let t = ck.transfer_agent(&mut new).unwrap();
+    (task, old, new, t)
+}
