@@ -82,12 +82,18 @@ fn eval_counts_successes_time_outs_and_completion() {
 
 #[test]
 fn eval_measures_the_walkers_foot_clearance() {
-    // the committed flat walker on two flat lanes (full collisions)
-    let ck = Checkpoint::read(&common::walker_path()).unwrap();
+    // the stepping foundation on two flat lanes (full collisions); the flat
+    // walker shuffles with swings of about 5 control steps, at the bound of
+    // what counts as a swing, so that on some machines none counted
+    let ck = Checkpoint::read(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/models/checkpoints/foundation_sym/checkpoints/latest.pt"
+    )))
+    .unwrap();
     let r = evaluate(&ck, &opts(2)).unwrap();
     assert_eq!(r.success_rate, 1.0);
     // the ankle frame sits a few cm above the sole in stance, and every swing
-    // lifts it higher (by about 3 cm for this walker)
+    // lifts it higher (by about 10 cm for this policy)
     let (top, stance) = (r.swing_peak_height, r.stance_foot_height);
     assert!((0.01..0.06).contains(&stance), "stance {stance}");
     assert!(
