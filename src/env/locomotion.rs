@@ -267,8 +267,8 @@ impl LocoEnv {
             (vx, vy)
         };
         self.state.command = [planar.0, planar.1, wz];
+        // the yaw target follows from it in `steer_heading`, which runs next
         self.heading = heading;
-        self.state.heading_target = heading;
     }
 
     /// One control step (see the module doc for the order). Returns this step's
