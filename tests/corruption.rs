@@ -343,7 +343,7 @@ fn every_damaged_bundle_is_refused_with_one_line() {
     let dir = Scratch::new("bundledamage");
     let ck = dreampolicy::rl::checkpoint::Checkpoint::read(&walker_path()).unwrap();
     let good = dir.0.join("good");
-    write_bundle(&ck, &good).unwrap();
+    write_bundle(&ck, &good, false).unwrap();
     Bundle::read(&good).unwrap();
     assert_success(&checkpoint_cmd("verify", &good));
     let mut n = 0;

@@ -18,7 +18,7 @@ use dreampolicy::sim::ObjType;
 fn walker_bundle(dir: &Scratch) -> std::path::PathBuf {
     let ck = Checkpoint::read(&walker_path()).unwrap();
     let out = dir.0.join("bundle");
-    let info = write_bundle(&ck, &out).unwrap();
+    let info = write_bundle(&ck, &out, false).unwrap();
     assert_eq!(info.history_len, 5);
     assert!(!info.uses_scan);
     out
@@ -214,24 +214,11 @@ fn broken_bundles_are_one_line_errors() {
     assert!(stderr.lines().count() <= 3, "{stderr}");
 }
 
-/// The stock-MuJoCo deployer in the venv setup.sh makes (skipped, with a line
-/// saying so, where the venv is absent: CI always has it).
-fn pyenv() -> Option<std::path::PathBuf> {
-    let py = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("third_party/pyenv/bin/python");
-    let ok = py.is_file()
-        && Command::new(&py)
-            .args(["-c", "import mujoco, numpy, yaml"])
-            .status()
-            .is_ok_and(|s| s.success());
-    if !ok {
-        eprintln!("skipped: third_party/pyenv lacks mujoco/numpy/yaml (run scripts/setup.sh)");
-    }
-    ok.then_some(py)
-}
-
 #[test]
 fn the_stock_mujoco_deployer_computes_the_policys_actions_and_walks() {
-    let Some(py) = pyenv() else { return };
+    let Some(py) = common::pyenv("mujoco, numpy, yaml") else {
+        return;
+    };
     let dir = Scratch::new("deploy-py");
     let bundle_dir = walker_bundle(&dir);
     let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/deploy_mujoco.py");

@@ -221,7 +221,7 @@ fn stock_deployer(
         ));
     }
     let bundle = out.join("bundle");
-    dreampolicy::deploy::write_bundle(ck, &bundle).context("exporting the bundle")?;
+    dreampolicy::deploy::write_bundle(ck, &bundle, false).context("exporting the bundle")?;
     let (lo, hi) = (cfg.eval.lin_vel_x[0], cfg.eval.lin_vel_x[1]);
     let length = cfg.eval.lane_length;
     let n = sd.episodes.max(1);

@@ -26,6 +26,7 @@ pub const FORMAT: &str = "dreampolicy-deploy/1";
 pub const BUNDLE_FILE: &str = "deploy.yaml";
 pub const POLICY_FILE: &str = "policy.pt";
 pub const NPZ_FILE: &str = "policy.npz";
+pub const ONNX_FILE: &str = "policy.onnx";
 
 /// `deploy.yaml`.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -37,6 +38,10 @@ pub struct Bundle {
     /// The same actor as NumPy arrays (`policy.npz`), for deployers without
     /// libtorch (`scripts/deploy_mujoco.py`).
     pub numpy_policy: crate::rl::export::NpzPolicy,
+    /// The same actor as an ONNX graph (`policy.onnx`, `export --format
+    /// onnx`), for runtimes without libtorch (onnxruntime, tract).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub onnx_policy: Option<OnnxSpec>,
     /// The checkpoint the bundle was made from.
     pub source: SourceSpec,
     /// The MuJoCo scene the policy was validated on (relative to the repository
@@ -77,6 +82,24 @@ pub struct PolicySpec {
     /// Whether the scan input changes the actions (a blind policy ignores it,
     /// but it is always passed).
     pub uses_scan: bool,
+}
+
+/// The ONNX file: the same function as [`PolicySpec`]'s, inputs named
+/// `obs`, `history`, `scan`, output `action`, batch dimension `batch`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OnnxSpec {
+    pub file: String,
+    /// Operator set of the default ONNX domain.
+    pub opset: i64,
+    pub ir_version: i64,
+    pub inputs: Vec<String>,
+    pub output: String,
+    /// Reference inputs and the TorchScript file's actions on them
+    /// (`policy_reference.npz`: rows of a rollout and random rows,
+    /// [`crate::rl::onnx::write_reference`]): a runtime that runs the ONNX
+    /// file should give these actions to ~1e-5.
+    pub reference: String,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -283,7 +306,8 @@ impl Bundle {
     /// Check the policy files against the digests `deploy.yaml` holds for them.
     fn check_files(&self, dir: &Path) -> Result<(), DeployError> {
         let path = dir.join(BUNDLE_FILE);
-        for name in [self.policy.file.as_str(), NPZ_FILE] {
+        for name in self.file_names() {
+            let name = name.as_str();
             let Some(digest) = self.files.get(name) else {
                 return Err(DeployError::Bundle {
                     path,
@@ -328,7 +352,7 @@ impl Bundle {
     /// sealed, atomically.
     fn write_sealed(&mut self, dir: &Path) -> Result<(), DeployError> {
         self.files.clear();
-        for name in [self.policy.file.clone(), NPZ_FILE.to_string()] {
+        for name in self.file_names() {
             let file = dir.join(&name);
             let digest = crate::seal::file_sha256(&file)
                 .map_err(|source| DeployError::Io { path: file, source })?;
@@ -341,6 +365,15 @@ impl Bundle {
         })?;
         crate::run::write_atomic(&path, crate::seal::seal_yaml(&text).as_bytes())
             .map_err(|(path, source)| DeployError::Io { path, source })
+    }
+
+    /// The bundle's files besides `deploy.yaml`, whose digests it holds.
+    fn file_names(&self) -> Vec<String> {
+        let mut v = vec![self.policy.file.clone(), NPZ_FILE.to_string()];
+        if let Some(o) = &self.onnx_policy {
+            v.extend([o.file.clone(), o.reference.clone()]);
+        }
+        v
     }
 
     /// The observation field called `name`.
@@ -359,14 +392,17 @@ impl Bundle {
 pub struct BundleInfo {
     pub dir: String,
     pub policy: String,
+    /// `policy.onnx`, when written.
+    pub onnx: Option<String>,
     pub bundle: String,
     pub history_len: usize,
     pub uses_scan: bool,
     pub eval_included: bool,
 }
 
-/// Write a bundle for checkpoint `ck` into `dir` (created).
-pub fn write_bundle(ck: &Checkpoint, dir: &Path) -> Result<BundleInfo, DeployError> {
+/// Write a bundle for checkpoint `ck` into `dir` (created); with `onnx`, the
+/// actor as `policy.onnx` too.
+pub fn write_bundle(ck: &Checkpoint, dir: &Path, onnx: bool) -> Result<BundleInfo, DeployError> {
     std::fs::create_dir_all(dir).map_err(|source| DeployError::Io {
         path: dir.to_path_buf(),
         source,
@@ -374,6 +410,27 @@ pub fn write_bundle(ck: &Checkpoint, dir: &Path) -> Result<BundleInfo, DeployErr
     let policy_path = dir.join(POLICY_FILE);
     let info = crate::rl::export::export(ck, &policy_path)?;
     let numpy_policy = crate::rl::export::export_npz(ck, &dir.join(NPZ_FILE))?;
+    let onnx_policy = if onnx {
+        let o = crate::rl::onnx::export_onnx(ck, &dir.join(ONNX_FILE))?;
+        let reference = crate::rl::onnx::REFERENCE_FILE;
+        crate::rl::onnx::write_reference(ck, &policy_path, &dir.join(reference))?;
+        Some(OnnxSpec {
+            file: ONNX_FILE.into(),
+            opset: o.opset,
+            ir_version: o.ir_version,
+            inputs: crate::rl::onnx::INPUTS
+                .iter()
+                .map(|s| s.to_string())
+                .collect(),
+            output: crate::rl::onnx::OUTPUT.into(),
+            reference: reference.into(),
+        })
+    } else {
+        // a bundle written again without ONNX must not keep a stale file
+        let _ = std::fs::remove_file(dir.join(ONNX_FILE));
+        let _ = std::fs::remove_file(dir.join(crate::rl::onnx::REFERENCE_FILE));
+        None
+    };
     let cfg = ck.config()?;
     let env = &cfg.env;
     // the G1's facts as the training env resolves them (gains, default pose,
@@ -474,6 +531,7 @@ pub fn write_bundle(ck: &Checkpoint, dir: &Path) -> Result<BundleInfo, DeployErr
             uses_scan: info.uses_scan,
         },
         numpy_policy,
+        onnx_policy,
         source: SourceSpec {
             checkpoint: ck.path.display().to_string(),
             iteration: ck.meta.iteration,
@@ -550,6 +608,10 @@ pub fn write_bundle(ck: &Checkpoint, dir: &Path) -> Result<BundleInfo, DeployErr
     Ok(BundleInfo {
         dir: dir.display().to_string(),
         policy: policy_path.display().to_string(),
+        onnx: bundle
+            .onnx_policy
+            .as_ref()
+            .map(|o| dir.join(&o.file).display().to_string()),
         bundle: path.display().to_string(),
         history_len: k,
         uses_scan: info.uses_scan,

@@ -35,7 +35,7 @@ fn normalize(x: &Tensor, mean: &Tensor, std: &Tensor, clip: f64, on: bool) -> Te
 
 /// The checkpoint's config and its agent (one env's buffers), weights and
 /// normalizers loaded: what both exports read.
-fn checkpoint_agent(ck: &Checkpoint) -> Result<(ExperimentConfig, Agent), RlError> {
+pub(crate) fn checkpoint_agent(ck: &Checkpoint) -> Result<(ExperimentConfig, Agent), RlError> {
     let cfg = ck.config()?;
     if cfg.task == crate::rl::config::TaskKind::Unified {
         return Err(RlError::Invalid(format!(

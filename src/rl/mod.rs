@@ -10,6 +10,7 @@ pub mod config;
 pub mod export;
 pub mod metrics;
 pub mod normalizer;
+pub mod onnx;
 pub mod optim;
 pub mod policy;
 pub mod ppo;

@@ -169,3 +169,20 @@ pub fn foundation_into_unified(
     let t = ck.transfer_agent(&mut new).unwrap();
     (task, old, new, t)
 }
+
+/// The venv `scripts/setup.sh` makes (`third_party/pyenv`), when it imports
+/// `modules` (`"mujoco, numpy"`); else None, with a line saying the test is
+/// skipped (CI always has it).
+#[allow(dead_code)]
+pub fn pyenv(modules: &str) -> Option<std::path::PathBuf> {
+    let py = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("third_party/pyenv/bin/python");
+    let ok = py.is_file()
+        && std::process::Command::new(&py)
+            .args(["-c", &format!("import {modules}")])
+            .status()
+            .is_ok_and(|s| s.success());
+    if !ok {
+        eprintln!("skipped: third_party/pyenv lacks {modules} (run scripts/setup.sh)");
+    }
+    ok.then_some(py)
+}
