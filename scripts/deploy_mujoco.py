@@ -10,7 +10,11 @@ object: distance, speed, tracking error, final yaw, fall.
 
     third_party/pyenv/bin/python scripts/deploy_mujoco.py --bundle DIR \
         [--scene models/g1/scene_flat.xml] [--seconds 20] [--speed 0.75] \
-        [--noise-seed 0]
+        [--noise-seed 0] [--runtime numpy|onnx]
+
+With `--runtime onnx` the actor is the bundle's `policy.onnx` run by
+onnxruntime (a bundle written with `export --format onnx`; GRU encoders too)
+instead of the NumPy arrays of `policy.npz`.
 
 The bundle's seal is checked first: `deploy.yaml` ends in
 `# dreampolicy-sha256: <hex>` (the SHA-256 of the lines above it) and lists the
@@ -18,8 +22,9 @@ SHA-256 of `policy.pt` and `policy.npz` under `files`; a damaged or edited
 bundle is refused.
 
 Needs mujoco, numpy and pyyaml (scripts/python.lock, installed by setup.sh into
-third_party/pyenv). Runs MLP-history and history-free policies; a GRU history
-encoder is refused with a message (use `dreampolicy deploy-sim`).
+third_party/pyenv), and onnxruntime for `--runtime onnx`. The NumPy actor runs
+MLP-history and history-free policies; a GRU encoder is refused with a message
+(use `--runtime onnx` or `dreampolicy deploy-sim`).
 """
 import argparse
 import hashlib
@@ -49,7 +54,10 @@ def check_bundle(bundle_dir, text, b):
                          "`dreampolicy export`")
     if hashlib.sha256(body.encode()).hexdigest() != last[len(SEAL_PREFIX):]:
         raise SystemExit(f"{path}: is corrupt: its SHA-256 does not match its seal line")
-    for name in (b["policy"]["file"], "policy.npz"):
+    names = [b["policy"]["file"], "policy.npz"]
+    if b.get("onnx_policy"):
+        names += [b["onnx_policy"]["file"], b["onnx_policy"]["reference"]]
+    for name in names:
         digest = (b.get("files") or {}).get(name)
         if digest is None:
             raise SystemExit(f"{path}: holds no SHA-256 for {name}")
@@ -105,6 +113,24 @@ class Policy:
         return self.layers("actor", self.spec["actor_layers"], np.concatenate(parts), False)
 
 
+class OnnxPolicy:
+    """The bundle's `policy.onnx` in onnxruntime: (obs, history, scan) -> action mean."""
+
+    def __init__(self, bundle_dir, spec):
+        import onnxruntime as ort
+
+        opts = ort.SessionOptions()
+        opts.intra_op_num_threads = 1
+        self.sess = ort.InferenceSession(os.path.join(bundle_dir, spec["file"]), opts,
+                                         providers=["CPUExecutionProvider"])
+
+    def __call__(self, obs, history, scan):
+        f = lambda x: np.asarray(x, dtype=np.float32)[None]
+        hist = np.asarray(history, dtype=np.float32).reshape(len(history), len(obs))
+        feeds = {"obs": f(obs), "history": hist[None], "scan": f(scan)}
+        return self.sess.run(["action"], feeds)[0][0].astype(np.float64)
+
+
 def quat_to_mat(q):
     w, x, y, z = q
     return np.array([
@@ -129,6 +155,8 @@ def main():
                    help="instead of walking: compare the NumPy actor's actions with the "
                         "cases in this file ([{obs, history, scan, action}], written by the "
                         "tests from the TorchScript policy); exit 1 past 1e-4")
+    p.add_argument("--runtime", choices=["numpy", "onnx"], default="numpy",
+                   help="the actor: policy.npz in NumPy, or policy.onnx in onnxruntime")
     a = p.parse_args()
 
     path = os.path.join(a.bundle, "deploy.yaml")
@@ -146,7 +174,13 @@ def main():
     check_bundle(a.bundle, text, b)
     if b.get("format") != "dreampolicy-deploy/1":
         raise SystemExit(f"{path}: format {b.get('format')!r}, this script reads dreampolicy-deploy/1")
-    policy = Policy(a.bundle, b["numpy_policy"])
+    if a.runtime == "onnx":
+        if not b.get("onnx_policy"):
+            raise SystemExit(f"{path}: has no ONNX policy; write the bundle with "
+                             "`dreampolicy export --format onnx`")
+        policy = OnnxPolicy(a.bundle, b["onnx_policy"])
+    else:
+        policy = Policy(a.bundle, b["numpy_policy"])
     if a.check_actions:
         worst = 0.0
         for case in json.load(open(a.check_actions)):
@@ -251,6 +285,7 @@ def main():
         "fell": fell_at is not None,
         "fell_at_s": fell_at,
         "observation_noise": rng is not None,
+        "runtime": a.runtime,
     }))
 
 
