@@ -6,7 +6,7 @@ mod common;
 
 use std::process::{Command, Stdio};
 
-use common::{load_config, Scratch};
+use common::{load_config, metrics_column as column, Scratch};
 use dreampolicy::rl::checkpoint::Checkpoint;
 use dreampolicy::rl::normalizer::RunningNorm;
 use dreampolicy::rl::runner::{self, latest_checkpoint};
@@ -36,20 +36,6 @@ fn metrics(dir: &std::path::Path) -> Vec<Vec<String>> {
             let v: Vec<&str> = l.split(',').collect();
             keep.iter().map(|&i| v[i].to_string()).collect()
         })
-        .collect()
-}
-
-fn column(dir: &std::path::Path, name: &str) -> Vec<f64> {
-    let text = std::fs::read_to_string(dir.join("metrics.csv")).unwrap();
-    let mut lines = text.lines();
-    let i = lines
-        .next()
-        .unwrap()
-        .split(',')
-        .position(|h| h == name)
-        .unwrap();
-    lines
-        .map(|l| l.split(',').nth(i).unwrap().parse().unwrap())
         .collect()
 }
 

@@ -174,11 +174,7 @@ fn a_mistyped_key_or_value_stops_the_sweep_before_any_run() {
 }
 
 fn metrics_iterations(run: &Path) -> Vec<f64> {
-    dreampolicy::plot::MetricsTable::read(&run.join("metrics.csv"))
-        .unwrap()
-        .column("iteration")
-        .unwrap()
-        .to_vec()
+    common::metrics_column(run, "iteration")
 }
 
 #[test]

@@ -10,7 +10,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{load_config, Scratch};
+use common::{load_config, metrics_column as column, Scratch};
 use dreampolicy::rl::runner;
 use dreampolicy::run::latest_checkpoint;
 use dreampolicy::run::tensorboard::{
@@ -191,18 +191,11 @@ fn every_metrics_column_has_a_grouped_tag() {
 
 /// The columns and rows of `dir/metrics.csv`.
 fn metrics(dir: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
-    let text = std::fs::read_to_string(dir.join("metrics.csv")).unwrap();
-    let mut lines = text.lines();
-    let cols = lines
-        .next()
-        .unwrap()
-        .split(',')
-        .map(str::to_string)
+    let t = common::metrics_table(dir);
+    let rows = (0..t.len())
+        .map(|r| t.columns.iter().map(|c| c[r]).collect())
         .collect();
-    let rows = lines
-        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
-        .collect();
-    (cols, rows)
+    (t.names, rows)
 }
 
 /// The one event file of `dir`, checked against `metrics.csv`: the version
@@ -236,12 +229,6 @@ fn check_events(dir: &Path) -> (PathBuf, Vec<Event>) {
         }
     }
     (files[0].clone(), events)
-}
-
-fn column(dir: &Path, name: &str) -> Vec<f64> {
-    let (cols, rows) = metrics(dir);
-    let i = cols.iter().position(|c| c == name).unwrap();
-    rows.iter().map(|r| r[i]).collect()
 }
 
 fn value(e: &Event, tag: &str) -> Option<f32> {

@@ -463,15 +463,13 @@ pub fn write_reference(
     let k = agent.policy.history_len();
     let (mut obs, mut hist, mut scan) = (Vec::new(), Vec::new(), Vec::new());
     for step in 0..60 {
-        agent.prepare(&env);
+        // the inputs of this step: the current state, the K before it
         if step % 6 == 5 {
             obs.extend_from_slice(env.obs());
             hist.extend_from_slice(agent.history());
             scan.extend_from_slice(env.scan());
         }
-        let a = agent.act_mean();
-        env.step(&a);
-        agent.after_step(&env);
+        agent.step_mean(&mut env);
     }
     let rows = obs.len() / d.obs;
     let module = tch::CModule::load(torchscript)?;

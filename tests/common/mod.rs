@@ -186,3 +186,15 @@ pub fn pyenv(modules: &str) -> Option<std::path::PathBuf> {
     }
     ok.then_some(py)
 }
+
+/// `dir/metrics.csv` read by the crate's own reader (the one `plot` uses).
+#[allow(dead_code)]
+pub fn metrics_table(dir: &std::path::Path) -> dreampolicy::plot::MetricsTable {
+    dreampolicy::plot::MetricsTable::read(&dir.join("metrics.csv")).unwrap()
+}
+
+/// Column `name` of `dir/metrics.csv`.
+#[allow(dead_code)]
+pub fn metrics_column(dir: &std::path::Path, name: &str) -> Vec<f64> {
+    metrics_table(dir).column(name).unwrap().to_vec()
+}
