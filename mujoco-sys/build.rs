@@ -76,8 +76,14 @@ fn main() {
         .allowlist_var(
             "mjNEQDATA|mjNDYN|mjNGAIN|mjNBIAS|mjNREF|mjNIMP|mjNSOLVER|mjMINVAL|mjMAXCONPAIR",
         )
-        // MJAPI variadic printing helpers and the UI/render API are not needed.
-        .blocklist_function("mjr_.*|mjui_.*|mjv_.*")
+        // The offscreen renderer's calls (dreampolicy::sim::render); the rest of
+        // the UI and render API, and MJAPI's variadic printing helpers, are not needed.
+        .allowlist_function(
+            "mjv_defaultCamera|mjv_defaultOption|mjv_defaultScene|mjv_makeScene|mjv_freeScene\
+             |mjv_updateScene|mjr_defaultContext|mjr_makeContext|mjr_freeContext|mjr_setBuffer\
+             |mjr_render|mjr_readPixels",
+        )
+        .blocklist_function("mjui_.*")
         .default_enum_style(bindgen::EnumVariation::Consts)
         .prepend_enum_name(false)
         .derive_default(true)

@@ -18,7 +18,7 @@ LAYERS = [
     ["data", "rl"],
     ["world_model"],
     ["unified"],
-    ["eval", "collect", "play", "deploy", "bench", "sweep"],
+    ["eval", "collect", "play", "deploy", "bench", "sweep", "benchmark"],
     ["cli", "main"],
 ]
 LEVEL = {m: i for i, layer in enumerate(LAYERS) for m in layer}

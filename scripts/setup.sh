@@ -3,7 +3,9 @@
 # second run checks what is there and only redoes what is missing.
 #
 #   1. Debian packages: libmujoco-dev (MuJoCo 2.2.2), clang/libclang (bindgen), unzip, python3-pip,
-#      python3-venv, fonts-dejavu-core (the TrueType font of the training-curve PNGs, src/plot.rs)
+#      python3-venv, fonts-dejavu-core (the TrueType font of the training-curve PNGs, src/plot.rs),
+#      libosmesa6 and ffmpeg (`dreampolicy render`: headless OpenGL for MuJoCo's renderer, and
+#      the video encoder)
 #   2. Registry wheels pinned by hash (scripts/wheels.lock), unpacked, never imported:
 #        third_party/libtorch/torch      libtorch 2.13 for tch 0.26 (+ nvidia/ runtime libs)
 #        third_party/mujoco-3.3.7        MuJoCo 3.3.7 headers + library (MUJOCO_DIR build)
@@ -23,7 +25,7 @@ cd "$ROOT"
 log() { printf '[setup] %s\n' "$*"; }
 
 # --- 1. Debian packages -------------------------------------------------------
-APT_PKGS=(libmujoco-dev libclang-dev clang pkg-config unzip python3 python3-pip python3-venv ca-certificates curl build-essential fonts-dejavu-core)
+APT_PKGS=(libmujoco-dev libclang-dev clang pkg-config unzip python3 python3-pip python3-venv ca-certificates curl build-essential fonts-dejavu-core libosmesa6 ffmpeg)
 missing=()
 for p in "${APT_PKGS[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

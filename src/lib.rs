@@ -7,7 +7,7 @@
 //! * [`terrain`] procedural heightfields: terrain kinds, curriculum map, lanes, PNGs
 //! * [`env`] the locomotion env and the batched `VecEnv`
 //! * [`eval`] lane evaluation: success and completion rates, tracking error
-//! * [`play`] one rollout of a checkpoint written as an MCAP file for Foxglove
+//! * [`play`] one rollout of a checkpoint written as an MCAP file for Foxglove, or rendered as a video
 //! * [`rl`] PPO on libtorch: actor-critic, storage, normalizers, checkpoints, runner
 //! * [`config`] serde structs of the YAML experiment files
 //! * [`world_model`] the terrain-aware autoregressive diffusion world model: DiT denoiser, DDPM/DDIM, CFG, scheduled-sampling trainer, rollout
@@ -20,7 +20,9 @@
 //! * [`collect`] the expert dataset's collection: specialists rolled out into MCAP shards
 //! * [`bench`] the `dreampolicy bench ...` measurements
 //! * [`sweep`] config-driven sweeps: sweep files, their runs, the task body, Slurm arrays, collection
+//! * [`benchmark`] the paper's comparison: methods x single, unseen and combined lanes, Wilson intervals, the report
 pub mod bench;
+pub mod benchmark;
 pub mod checkpoint;
 pub mod collect;
 pub mod config;

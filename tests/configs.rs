@@ -52,6 +52,22 @@ fn every_shipped_config_loads() {
             }
             continue;
         }
+        // configs/benchmark/ holds benchmark files: the small one names
+        // committed checkpoints, which must exist
+        if f.parent().is_some_and(|d| d.ends_with("benchmark")) {
+            let b = dreampolicy::benchmark::BenchmarkConfig::load(f, &[])
+                .unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+            for m in &b.methods {
+                for ck in m.checkpoint.iter().chain(m.checkpoints.values()) {
+                    if ck.starts_with("models/") {
+                        let p = Path::new(env!("CARGO_MANIFEST_DIR")).join(ck);
+                        assert!(p.is_file(), "{}: {} missing", f.display(), ck.display());
+                    }
+                }
+            }
+            assert!(!b.cells().is_empty(), "{}", f.display());
+            continue;
+        }
         // configs/sweeps/ holds sweep files: every run's config loads
         if f.parent().is_some_and(|d| d.ends_with("sweeps")) {
             let s = dreampolicy::sweep::Sweep::load(f)

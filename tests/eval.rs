@@ -23,6 +23,7 @@ fn tiny_checkpoint(dir: &Scratch, sets: &[&str]) -> Checkpoint {
 fn opts(episodes: usize) -> EvalOptions {
     EvalOptions {
         terrain: TerrainKind::Flat,
+        then: None,
         episodes,
         full_collision: true,
         seed: 3,
@@ -117,6 +118,7 @@ fn foot_clearance_over_a_gap_is_measured_against_the_platforms() {
     let ck = Checkpoint::read(&common::walker_path()).unwrap();
     let o = EvalOptions {
         terrain: TerrainKind::Gap,
+        then: None,
         level: Some(0),
         table: dreampolicy::eval::EvalTable::Eval,
         ..opts(2)
@@ -315,6 +317,7 @@ fn terrain_lanes_are_walked_and_episodes_spread_over_lanes() {
     );
     let o = EvalOptions {
         terrain: TerrainKind::Stair,
+        then: None,
         ..opts(5)
     };
     let r = evaluate(&ck, &o).unwrap();
@@ -381,6 +384,7 @@ fn terrain_lanes_are_walked_and_episodes_spread_over_lanes() {
     );
     let o = EvalOptions {
         terrain: TerrainKind::Uneven,
+        then: None,
         ..opts(4)
     };
     let r = evaluate(&ck, &o).unwrap();

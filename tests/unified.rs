@@ -330,6 +330,7 @@ fn a_resumed_tiny_unified_run_is_bit_identical() {
     for terrain in [TerrainKind::Flat, TerrainKind::Gap] {
         let o = dreampolicy::eval::EvalOptions {
             terrain,
+            then: None,
             episodes: 2,
             full_collision: true,
             seed: 0,

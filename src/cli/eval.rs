@@ -83,6 +83,7 @@ impl EvalArgs {
     fn options(&self, kind: TerrainKind, level: Option<usize>) -> eval::EvalOptions {
         eval::EvalOptions {
             terrain: kind,
+            then: None,
             episodes: self.episodes,
             full_collision: self.full_collision,
             seed: self.seed,

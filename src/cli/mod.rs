@@ -5,6 +5,7 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 
 mod bench;
+mod benchmark;
 mod checkpoint;
 mod collect;
 mod data;
@@ -15,6 +16,7 @@ mod export;
 mod info;
 mod play;
 mod plot;
+mod render;
 mod rollout;
 mod sim2sim;
 mod sweep;
@@ -45,6 +47,10 @@ enum Command {
     /// Train a policy.
     #[command(subcommand)]
     Train(train::TrainCommand),
+    /// The paper's comparison: every method checkpoint of a benchmark file on
+    /// the single, unseen and combined lanes, with 95 % intervals; a report
+    /// laid out as the paper's tables, heatmaps and bar charts; resumable.
+    Benchmark(benchmark::BenchmarkArgs),
     /// Roll out every terrain specialist on its terrain and write the expert
     /// dataset (MCAP shards, one per specialist and round; existing shards are
     /// kept and skipped, so the same command resumes a crashed collection).
@@ -58,6 +64,10 @@ enum Command {
     /// Roll a checkpoint's policy out on one lane and write the rollout as an
     /// MCAP file for Foxglove (transforms, robot, terrain, command, state, reward).
     Play(play::PlayArgs),
+    /// Roll a checkpoint's policy out on one lane and write it as a video (MP4
+    /// or GIF): MuJoCo's own renderer, headless (OSMesa), a camera that follows
+    /// the robot, frames encoded by ffmpeg.
+    Render(render::RenderArgs),
     /// Draw a run directory's training curves (plots/training.png) from its metrics.csv.
     Plot(plot::PlotArgs),
     /// Export a checkpoint as a deployment bundle: the actor (normalization
@@ -96,6 +106,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Bench(which) => bench::run(which),
         Command::Rollout(a) => rollout::run(a),
         Command::Train(which) => train::run(which),
+        Command::Benchmark(a) => benchmark::run(a),
         Command::Collect(a) => collect::run(a),
         Command::Eval(eval::EvalArgs {
             which: Some(eval::EvalCommand::WorldModel(a)),
@@ -103,6 +114,7 @@ pub fn run(cli: Cli) -> Result<()> {
         }) => eval_wm::run(a),
         Command::Eval(a) => eval::run(a),
         Command::Play(a) => play::run(a),
+        Command::Render(a) => render::run(a),
         Command::Plot(a) => plot::run(a),
         Command::Export(a) => export::run(a),
         Command::DeploySim(a) => deploy::run(a),

@@ -8,18 +8,15 @@ use dreampolicy::play::{self, PlayOptions};
 use dreampolicy::rl::checkpoint::Checkpoint;
 use dreampolicy::terrain::TerrainKind;
 
-/// Arguments of `play`.
+/// The rollout `play` and `render` share: checkpoint, lane, speed, seed, scene.
 #[derive(clap::Args)]
-pub struct PlayArgs {
+pub struct LaneArgs {
     #[arg(long)]
     checkpoint: PathBuf,
     /// Terrain of the lane: flat, uneven, stair, gap, bridge, wave, slope,
     /// balancing_beam, slope_bridge.
     #[arg(long, default_value = "flat")]
     terrain: String,
-    /// The MCAP file to write (replaced if it exists).
-    #[arg(long)]
-    out: PathBuf,
     /// Simulated seconds (the rollout stops earlier at a fall).
     #[arg(long, default_value_t = play::DEFAULT_SECONDS)]
     seconds: f64,
@@ -44,30 +41,66 @@ pub struct PlayArgs {
     /// libtorch threads.
     #[arg(long, default_value_t = 1)]
     threads: i32,
+}
+
+impl LaneArgs {
+    /// The checkpoint, read, and the rollout's options writing to `out`.
+    pub fn options(&self, out: PathBuf) -> Result<(Checkpoint, PlayOptions)> {
+        let terrain = TerrainKind::from_name(&self.terrain)?;
+        let ck = Checkpoint::read(&self.checkpoint)?;
+        tch::set_num_threads(self.threads.max(1));
+        let opts = PlayOptions {
+            terrain,
+            level: self.level,
+            seconds: self.seconds,
+            speed: self.speed,
+            seed: self.seed,
+            full_collision: self.full_collision,
+            lane_lookahead: self.lane_lookahead,
+            out,
+        };
+        Ok((ck, opts))
+    }
+}
+
+/// Arguments of `play`.
+#[derive(clap::Args)]
+pub struct PlayArgs {
+    #[command(flatten)]
+    lane: LaneArgs,
+    /// The MCAP file to write (replaced if it exists).
+    #[arg(long)]
+    out: PathBuf,
     /// Print the summary as one JSON object.
     #[arg(long)]
     json: bool,
 }
 
 pub fn run(a: PlayArgs) -> Result<()> {
-    let terrain = TerrainKind::from_name(&a.terrain)?;
-    let ck = Checkpoint::read(&a.checkpoint)?;
-    tch::set_num_threads(a.threads.max(1));
-    let opts = PlayOptions {
-        terrain,
-        level: a.level,
-        seconds: a.seconds,
-        speed: a.speed,
-        seed: a.seed,
-        full_collision: a.full_collision,
-        lane_lookahead: a.lane_lookahead,
-        out: a.out.clone(),
-    };
+    let (ck, opts) = a.lane.options(a.out.clone())?;
     let s = play::play(&ck, &opts).with_context(|| format!("playing into {}", a.out.display()))?;
     if a.json {
         println!("{}", serde_json::to_string(&s)?);
         return Ok(());
     }
+    let (ending, lane) = describe(&s);
+    println!(
+        "{}: {} ({}{lane}), {} steps, {:.2} m at {:.2} m/s (commanded {:.2}), {ending}; {} frames, {:.2} MB",
+        s.out,
+        s.terrain,
+        if s.full_collision { "full collision" } else { "training scene" },
+        s.steps,
+        s.distance,
+        s.mean_forward_speed,
+        s.commanded_speed,
+        s.frames,
+        s.file_bytes as f64 / 1e6
+    );
+    Ok(())
+}
+
+/// How a rollout ended and which lane it walked, in words.
+pub fn describe(s: &play::PlaySummary) -> (String, String) {
     let ending = match s.ending {
         play::Ending::TimeUp => "ran its time".to_string(),
         play::Ending::Fell => format!("FELL at {:.2} s", s.seconds),
@@ -82,17 +115,5 @@ pub fn run(a: PlayArgs) -> Result<()> {
         ),
         _ => String::new(),
     };
-    println!(
-        "{}: {} ({}{lane}), {} steps, {:.2} m at {:.2} m/s (commanded {:.2}), {ending}; {} frames, {:.2} MB",
-        s.out,
-        s.terrain,
-        if s.full_collision { "full collision" } else { "training scene" },
-        s.steps,
-        s.distance,
-        s.mean_forward_speed,
-        s.commanded_speed,
-        s.frames,
-        s.file_bytes as f64 / 1e6
-    );
-    Ok(())
+    (ending, lane)
 }

@@ -165,7 +165,7 @@ pub fn scene_xml(cfg: &EnvConfig, terrain: Option<&TerrainMap>) -> String {
     let (asset, ground) = match terrain {
         None => (
             String::new(),
-            r#"<geom name="terrain" type="plane" size="0 0 1" contype="1" conaffinity="1" condim="3"/>"#
+            r#"<geom name="terrain" type="plane" size="0 0 1" material="ground" contype="1" conaffinity="1" condim="3"/>"#
                 .to_string(),
         ),
         Some(map) => {
@@ -178,23 +178,35 @@ pub fn scene_xml(cfg: &EnvConfig, terrain: Option<&TerrainMap>) -> String {
             let (nrow, ncol) = map.hfield_shape();
             (
                 format!(
-                    r#"<asset><hfield name="terrain" nrow="{nrow}" ncol="{ncol}" size="{} {} {} {}"/></asset>"#,
+                    r#"<hfield name="terrain" nrow="{nrow}" ncol="{ncol}" size="{} {} {} {}"/>"#,
                     size[0], size[1], size[2], size[3]
                 ),
                 format!(
-                    r#"<geom name="terrain" type="hfield" hfield="terrain" pos="{} {} {}" contype="1" conaffinity="1" condim="3"{user}/>"#,
+                    r#"<geom name="terrain" type="hfield" hfield="terrain" material="ground" pos="{} {} {}" contype="1" conaffinity="1" condim="3"{user}/>"#,
                     pos[0], pos[1], pos[2]
                 ),
             )
         }
     };
+    // The sky, the ground's 1 m checker and the light only matter to
+    // `render` (sim::render): no physics reads them.
     format!(
         r#"<mujoco model="g1_dreampolicy">
   <include file="g1_actuators.xml"/>
   <option timestep="{dt}" integrator="{integrator}" iterations="{iterations}"{ls_iterations}/>
   <size nconmax="{nconmax}" njmax="{njmax}"/>
-  {asset}
+  <visual>
+    <headlight diffuse=".5 .5 .5" ambient=".35 .35 .35" specular="0 0 0"/>
+    <quality shadowsize="2048"/>
+  </visual>
+  <asset>
+    <texture name="sky" type="skybox" builtin="gradient" rgb1=".45 .6 .75" rgb2=".05 .07 .1" width="64" height="384"/>
+    <texture name="ground" type="2d" builtin="checker" mark="edge" rgb1=".32 .36 .4" rgb2=".24 .27 .3" markrgb=".55 .6 .65" width="256" height="256"/>
+    <material name="ground" texture="ground" texrepeat="1 1" texuniform="true"/>
+    {asset}
+  </asset>
   <worldbody>
+    <light name="sun" pos="0 0 10" dir="0.3 0.2 -1" directional="true" diffuse=".6 .6 .6" castshadow="true"/>
     {ground}
   </worldbody>
 </mujoco>

@@ -84,6 +84,9 @@ pub const OVER_GROUND: f64 = 0.2;
 #[derive(Debug, Clone)]
 pub struct EvalOptions {
     pub terrain: TerrainKind,
+    /// A combined lane: `terrain` in the first half of the walk, this kind in
+    /// the second (the paper's pairs: [`crate::terrain::COMBINED_PAIRS`]).
+    pub then: Option<TerrainKind>,
     pub episodes: usize,
     /// The project's default scene (full collisions, default solver) instead of
     /// the checkpoint's training scene.
@@ -184,7 +187,11 @@ pub fn evaluate_in(
         let lanes = cfg.eval.lanes.clamp(1, o.episodes);
         for k in 0..lanes {
             let count = o.episodes / lanes + usize::from(k < o.episodes % lanes);
-            let lane = eval_lane(cfg, o.terrain, level, o.seed.wrapping_add(k as u64))?;
+            let seed = o.seed.wrapping_add(k as u64);
+            let lane = match o.then {
+                None => eval_lane(cfg, o.terrain, level, seed)?,
+                Some(then) => eval_combined_lane(cfg, o.terrain, then, level, seed)?,
+            };
             let mut lane_cfg = env_cfg.clone();
             lane_cfg.n_envs = env_cfg.n_envs.min(count as i64);
             lane_cfg.seed = o.seed.wrapping_add(1000 * k as u64);
@@ -195,7 +202,7 @@ pub fn evaluate_in(
     }
     let d = t.done as f64;
     Ok(EvalReport {
-        terrain: o.terrain.name().to_string(),
+        terrain: lane_name(o.terrain, o.then),
         episodes: t.done,
         success_rate: t.successes as f64 / d,
         completion_rate: t.completion / d,
@@ -254,6 +261,43 @@ pub fn eval_lane(
         seed,
     )
     .map_err(|e| RlError::Invalid(format!("building the {} lane: {e}", kind.name())))
+}
+
+/// The combined lane `first` then `second` of `eval_lane`'s table, level and
+/// seed (`eval.lane_length` in all, half each).
+pub fn eval_combined_lane(
+    cfg: &ExperimentConfig,
+    first: TerrainKind,
+    second: TerrainKind,
+    level: usize,
+    seed: u64,
+) -> Result<Lane, RlError> {
+    let map_cfg = &cfg.eval.terrain;
+    TerrainMap::combined_lane(
+        map_cfg,
+        first,
+        second,
+        level,
+        cfg.eval
+            .lane_length
+            .max(2.0 * crate::terrain::lane::MIN_SEGMENT_LENGTH),
+        map_cfg.tile_width,
+        seed,
+    )
+    .map_err(|e| {
+        RlError::Invalid(format!(
+            "building the {} lane: {e}",
+            lane_name(first, Some(second))
+        ))
+    })
+}
+
+/// A lane's name: its kind, or `first&second` for a combined lane.
+pub fn lane_name(first: TerrainKind, then: Option<TerrainKind>) -> String {
+    match then {
+        None => first.name().to_string(),
+        Some(t) => format!("{}&{}", first.name(), t.name()),
+    }
 }
 
 /// What `eval.terrain` is, in words: "the paper's table" when the config keeps

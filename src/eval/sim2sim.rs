@@ -209,6 +209,7 @@ pub fn run_cells(
 ) -> Result<Vec<CellResult>, RlError> {
     let o = EvalOptions {
         terrain: c.kind(),
+        then: None,
         episodes: c.episodes,
         full_collision: c.full_collision,
         seed: c.seed,

@@ -119,11 +119,13 @@ pub const REWARD_FIELDS: [(&str, &str); 3] = [
     ("return", "sum of the rewards so far"),
 ];
 
-/// An MCAP file being written.
+/// An MCAP file being written (or, [`PlayFile::discard`], only counted).
 pub struct PlayFile {
     tmp: PathBuf,
     path: PathBuf,
     writer: Option<Writer<BufWriter<File>>>,
+    /// Count the messages, write nothing (a rollout rendered to video only).
+    discard: bool,
     channels: [u16; 7],
     counts: [u64; 7],
     buf: Vec<u8>,
@@ -150,6 +152,7 @@ impl PlayFile {
             tmp,
             path: path.to_path_buf(),
             writer: None,
+            discard: false,
             channels: [0; 7],
             counts: [0; 7],
             buf: Vec::with_capacity(1 << 16),
@@ -205,6 +208,20 @@ impl PlayFile {
         Ok(f)
     }
 
+    /// No file: every message is counted and dropped; [`PlayFile::finish`]
+    /// returns 0 bytes.
+    pub fn discard() -> PlayFile {
+        PlayFile {
+            tmp: PathBuf::new(),
+            path: PathBuf::new(),
+            writer: None,
+            discard: true,
+            channels: [0; 7],
+            counts: [0; 7],
+            buf: Vec::new(),
+        }
+    }
+
     fn mcap_err(&self) -> impl Fn(mcap::McapError) -> PlayError {
         let path = self.tmp.clone();
         move |source| PlayError::Mcap {
@@ -221,6 +238,10 @@ impl PlayFile {
         msg: &T,
     ) -> Result<(), PlayError> {
         let k = topic as usize;
+        if self.discard {
+            self.counts[k] += 1;
+            return Ok(());
+        }
         self.buf.clear();
         serde_json::to_writer(&mut self.buf, msg).map_err(|e| PlayError::Json {
             topic: topic.name(),
@@ -249,6 +270,9 @@ impl PlayFile {
 
     /// Write the summary and footer, fsync, rename to the final path; its size in bytes.
     pub fn finish(mut self) -> Result<u64, PlayError> {
+        if self.discard {
+            return Ok(0);
+        }
         let err = self.mcap_err();
         let mut w = self.writer.take().expect("the writer lives until finish");
         w.finish().map_err(&err)?;

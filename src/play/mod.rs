@@ -24,6 +24,7 @@
 pub mod file;
 pub mod foxglove;
 pub mod scene;
+pub mod video;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -70,6 +71,10 @@ pub enum PlayError {
     },
     #[error("encoding a {topic} message: {why}")]
     Json { topic: &'static str, why: String },
+    #[error(transparent)]
+    Sim(#[from] crate::sim::SimError),
+    #[error(transparent)]
+    Plot(#[from] crate::plot::PlotError),
     #[error("{0}")]
     Invalid(String),
 }
@@ -245,11 +250,37 @@ impl PlayTask for crate::unified::task::UnifiedTask {
     }
 }
 
+/// What else watches a rollout, frame by frame: `render`'s video encoder.
+pub trait FrameSink {
+    /// Frame `k` of the rollout: env 0 of `env` holds the state after `k`
+    /// control steps (frame 0: the reset state). Called for every frame the
+    /// MCAP file gets, in order.
+    fn frame(&mut self, env: &VecEnv, k: u64) -> Result<(), PlayError>;
+}
+
+/// No sink: `play` alone.
+impl FrameSink for () {
+    fn frame(&mut self, _: &VecEnv, _: u64) -> Result<(), PlayError> {
+        Ok(())
+    }
+}
+
 /// Roll the checkpoint's policy out on one lane and write `o.out`. A unified
 /// policy runs the paper's inference loop (the world model named in its
 /// config plans from the robot's history and the lane's scandots) and its
 /// plan goes to `/plan`.
 pub fn play(ck: &Checkpoint, o: &PlayOptions) -> Result<PlaySummary, PlayError> {
+    play_into(ck, o, Some(&o.out), &mut ())
+}
+
+/// [`play`], writing the MCAP file to `mcap` (None: no file) and handing every
+/// frame to `sink`. The summary's `out` is `o.out` either way.
+pub fn play_into(
+    ck: &Checkpoint,
+    o: &PlayOptions,
+    mcap: Option<&Path>,
+    sink: &mut dyn FrameSink,
+) -> Result<PlaySummary, PlayError> {
     check(o)?;
     let cfg = ck.config()?;
     let [lo, hi] = cfg.eval.lin_vel_x;
@@ -273,9 +304,9 @@ pub fn play(ck: &Checkpoint, o: &PlayOptions) -> Result<PlaySummary, PlayError> 
     };
     if cfg.task == crate::rl::config::TaskKind::Unified {
         let mut task = crate::unified::task::UnifiedTask::with_env(&cfg, env)?;
-        run.go(&mut task)
+        run.go(&mut task, mcap, sink)
     } else {
-        run.go(&mut env)
+        run.go(&mut env, mcap, sink)
     }
 }
 
@@ -290,7 +321,12 @@ struct Rollout<'a> {
 }
 
 impl Rollout<'_> {
-    fn go<T: PlayTask>(&self, task: &mut T) -> Result<PlaySummary, PlayError> {
+    fn go<T: PlayTask>(
+        &self,
+        task: &mut T,
+        mcap: Option<&Path>,
+        sink: &mut dyn FrameSink,
+    ) -> Result<PlaySummary, PlayError> {
         let Rollout {
             ck,
             cfg,
@@ -337,7 +373,10 @@ impl Rollout<'_> {
         if let Some(wm) = world_model {
             metadata.insert("world_model".into(), wm);
         }
-        let mut file = PlayFile::create(&o.out, metadata, &term_names, plans)?;
+        let mut file = match mcap {
+            Some(path) => PlayFile::create(path, metadata, &term_names, plans)?,
+            None => PlayFile::discard(),
+        };
 
         // the scene, once, at frame 0
         let t0 = Time::from_nanos(START_NS);
@@ -371,6 +410,7 @@ impl Rollout<'_> {
         let weight = task.loco().shared().scene.robot_weight;
         let mut distance = write_frame(&mut file, task.loco(), &frames, 0, dt, weight, spawn)?;
         write_plan(&mut file, task, START_NS)?;
+        sink.frame(task.loco(), 0)?;
         for k in 1..=max_steps {
             agent.step_mean(task);
             steps = k;
@@ -408,6 +448,7 @@ impl Rollout<'_> {
             )?;
             distance = write_frame(&mut file, task.loco(), &frames, k, dt, weight, spawn)?;
             write_plan(&mut file, task, t)?;
+            sink.frame(task.loco(), k)?;
         }
         let written = file.count(Topic::State);
         let file_bytes = file.finish()?;

@@ -462,7 +462,7 @@ pub fn tick_label(v: f64) -> String {
 
 /// Register the TrueType font under plotters' "sans-serif" once per process
 /// (plotters keeps `&'static` font bytes, so they are leaked once).
-fn register_font() -> Result<(), PlotError> {
+pub fn register_font() -> Result<(), PlotError> {
     static DONE: Mutex<bool> = Mutex::new(false);
     let mut done = DONE.lock().unwrap_or_else(|e| e.into_inner());
     if *done {
@@ -487,7 +487,7 @@ fn register_font() -> Result<(), PlotError> {
 }
 
 /// Encode an RGB buffer as PNG at `path`, via `path.tmp` and a rename.
-fn write_png(path: &Path, w: u32, h: u32, rgb: &[u8]) -> Result<(), PlotError> {
+pub fn write_png(path: &Path, w: u32, h: u32, rgb: &[u8]) -> Result<(), PlotError> {
     let io = |source| PlotError::Io {
         path: path.into(),
         source,

@@ -45,6 +45,9 @@ pub enum SimError {
     /// A heightfield value or geometry that MuJoCo cannot represent.
     #[error("heightfield: {0}")]
     Hfield(String),
+    /// Offscreen rendering is unavailable or failed (`sim::render`).
+    #[error("rendering: {0}")]
+    Render(String),
     /// A G1 joint's armature in the compiled model is not its motor's (robot::check_armature).
     #[error(
         "model {model}: joint {joint} has armature {found}, the motor table says {expected}; \

@@ -9,6 +9,7 @@ pub mod handlers;
 mod hfield;
 pub mod hfield_contact;
 mod model;
+pub mod render;
 
 pub use data::{contact_geoms, Contact, Data, DEFAULT_MAX_QVEL, NUM_WARNINGS};
 pub use error::{Instability, SimError};

@@ -747,6 +747,7 @@ fn evaluate_run(
         &ck,
         &crate::eval::EvalOptions {
             terrain,
+            then: None,
             episodes: e.episodes,
             full_collision: e.full_collision,
             seed: e.seed,

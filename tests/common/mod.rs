@@ -95,13 +95,18 @@ pub fn write_synthetic_shard(
 /// Run a command to success (else fail with its stderr) and return its stdout.
 #[allow(dead_code)]
 pub fn run_ok(cmd: &mut std::process::Command) -> String {
+    String::from_utf8_lossy(&run_ok_bytes(cmd)).into_owned()
+}
+
+/// [`run_ok`], stdout as bytes (a decoded video).
+pub fn run_ok_bytes(cmd: &mut std::process::Command) -> Vec<u8> {
     let out = cmd.output().unwrap();
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    String::from_utf8_lossy(&out.stdout).into_owned()
+    out.stdout
 }
 
 /// Step `task` `steps` times with `old`'s deterministic actions, checking at

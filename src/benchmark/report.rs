@@ -1,0 +1,320 @@
+//! The benchmark's report: `results.md` (a table per paper table and level,
+//! our cells with their 95 % intervals, the paper's published numbers in a
+//! column group of their own), `<table>_success.png` (a heatmap of success,
+//! methods x lanes) and `<table>_bars.png` (success and completion bars with
+//! the intervals) per table, at the first level of the config.
+use std::fmt::Write as _;
+use std::path::Path;
+
+use plotters::prelude::*;
+
+use super::{BenchmarkConfig, BenchmarkError, PaperMethod, Row, Table};
+
+/// The paper's published numbers (percent): (success, completion) per lane, in
+/// [`Table::lanes`] order. The unseen table is the paper's Table 1, the
+/// combined one its Table 2 (only distillation and ours); the single-terrain
+/// results are a radar figure without numbers.
+pub fn paper_numbers(table: Table, method: PaperMethod) -> Option<Vec<(f64, f64)>> {
+    use PaperMethod::*;
+    let v: &[(f64, f64)] = match (table, method) {
+        (Table::Unseen, Ours) => &[
+            (92.77, 60.48),
+            (96.35, 90.32),
+            (100.0, 100.0),
+            (100.0, 100.0),
+        ],
+        (Table::Unseen, Distillation) => &[
+            (65.48, 40.16),
+            (74.36, 60.24),
+            (100.0, 100.0),
+            (100.0, 100.0),
+        ],
+        (Table::Unseen, WithoutDiffusion) => {
+            &[(0.0, 10.35), (20.14, 35.78), (97.32, 98.46), (98.65, 99.16)]
+        }
+        (Table::Unseen, WithoutGcrl) => &[(0.0, 1.35), (0.0, 5.34), (60.38, 80.26), (94.35, 90.63)],
+        (Table::Combined, Ours) => &[
+            (88.46, 96.25),
+            (84.78, 90.64),
+            (95.79, 98.68),
+            (91.45, 84.65),
+            (94.68, 96.58),
+        ],
+        (Table::Combined, Distillation) => &[
+            (50.48, 76.45),
+            (62.33, 74.58),
+            (88.42, 90.35),
+            (86.76, 72.17),
+            (91.34, 82.65),
+        ],
+        _ => return None,
+    };
+    Some(v.to_vec())
+}
+
+fn paper_name(m: PaperMethod) -> &'static str {
+    match m {
+        PaperMethod::Ours => "DreamPolicy",
+        PaperMethod::Distillation => "Distillation",
+        PaperMethod::WithoutDiffusion => "w/o diffusion",
+        PaperMethod::WithoutGcrl => "w/o GCRL",
+    }
+}
+
+fn pct(v: f64) -> String {
+    if v.is_finite() {
+        format!("{:.0}", 100.0 * v)
+    } else {
+        "—".into()
+    }
+}
+
+/// Our cell as `success [lo–hi] · completion`, or a dash.
+fn cell_text(r: Option<&Row>) -> String {
+    match r {
+        Some(r) => format!(
+            "{} [{}–{}] · {}",
+            pct(r.success_rate),
+            pct(r.success_lo),
+            pct(r.success_hi),
+            pct(r.completion_rate)
+        ),
+        None => "—".into(),
+    }
+}
+
+/// The Markdown report.
+pub fn markdown(cfg: &BenchmarkConfig, rows: &[Row]) -> String {
+    let mut md = String::new();
+    let title = cfg.name.as_deref().unwrap_or("benchmark");
+    let _ = writeln!(md, "# {title}\n");
+    let _ = writeln!(
+        md,
+        "Each cell: success rate % [95 % Wilson interval] · completion rate %, over {} \
+         episodes on 10 m lanes ({} scene, seed {}); MuJoCo {}. The paper's columns are its \
+         published numbers (success · completion), not measured here.\n",
+        cfg.episodes,
+        if cfg.full_collision {
+            "full-collision"
+        } else {
+            "each checkpoint's training"
+        },
+        cfg.seed,
+        crate::sim::mujoco_version()
+    );
+    for table in &cfg.tables {
+        let lanes = table.lane_names();
+        for level in &cfg.levels {
+            let _ = writeln!(md, "## {} terrains, level {level}\n", table.name());
+            let _ = writeln!(md, "| method | {} |", lanes.join(" | "));
+            let _ = writeln!(md, "|---|{}", "---|".repeat(lanes.len()));
+            for m in &cfg.methods {
+                let cells: Vec<String> = lanes
+                    .iter()
+                    .map(|lane| {
+                        cell_text(rows.iter().find(|r| {
+                            r.table == *table
+                                && r.method == m.name
+                                && &r.lane == lane
+                                && r.level == *level
+                        }))
+                    })
+                    .collect();
+                let _ = writeln!(md, "| {} | {} |", m.name, cells.join(" | "));
+            }
+            let paper: Vec<(PaperMethod, Vec<(f64, f64)>)> = [
+                PaperMethod::Ours,
+                PaperMethod::Distillation,
+                PaperMethod::WithoutDiffusion,
+                PaperMethod::WithoutGcrl,
+            ]
+            .into_iter()
+            .filter_map(|p| paper_numbers(*table, p).map(|v| (p, v)))
+            .collect();
+            if !paper.is_empty() {
+                let _ = writeln!(
+                    md,
+                    "\nThe paper (published, Isaac Gym; its level is not stated):\n"
+                );
+                let _ = writeln!(md, "| paper's method | {} |", lanes.join(" | "));
+                let _ = writeln!(md, "|---|{}", "---|".repeat(lanes.len()));
+                for (p, v) in paper {
+                    let cells: Vec<String> =
+                        v.iter().map(|(s, c)| format!("{s:.1} · {c:.1}")).collect();
+                    let ours: Vec<&str> = cfg
+                        .methods
+                        .iter()
+                        .filter(|m| m.paper == Some(p))
+                        .map(|m| m.name.as_str())
+                        .collect();
+                    let beside = if ours.is_empty() {
+                        String::new()
+                    } else {
+                        format!(" (ours: {})", ours.join(", "))
+                    };
+                    let _ = writeln!(md, "| {}{beside} | {} |", paper_name(p), cells.join(" | "));
+                }
+            }
+            let _ = writeln!(md);
+        }
+    }
+    md
+}
+
+/// Write `results.md` and the figures into `out`.
+pub fn write(cfg: &BenchmarkConfig, rows: &[Row], out: &Path) -> Result<(), BenchmarkError> {
+    let md = out.join("results.md");
+    std::fs::write(&md, markdown(cfg, rows)).map_err(|e| BenchmarkError::io(&md, e))?;
+    let level = cfg.levels[0];
+    for table in &cfg.tables {
+        let lanes = table.lane_names();
+        let methods: Vec<String> = cfg.methods.iter().map(|m| m.name.clone()).collect();
+        let find = |m: &str, lane: &str| {
+            rows.iter()
+                .find(|r| r.table == *table && r.method == m && r.lane == lane && r.level == level)
+        };
+        let success: Vec<Vec<f64>> = methods
+            .iter()
+            .map(|m| {
+                lanes
+                    .iter()
+                    .map(|l| find(m, l).map_or(f64::NAN, |r| r.success_rate))
+                    .collect()
+            })
+            .collect();
+        crate::plot::heatmap(
+            &out.join(format!("{}_success.png", table.name())),
+            &format!("success rate, {} terrains, level {level}", table.name()),
+            &methods,
+            &lanes,
+            &success,
+        )?;
+        let bars: Vec<Vec<Option<&Row>>> = methods
+            .iter()
+            .map(|m| lanes.iter().map(|l| find(m, l)).collect())
+            .collect();
+        bar_chart(
+            &out.join(format!("{}_bars.png", table.name())),
+            &format!("{} terrains, level {level}", table.name()),
+            &methods,
+            &lanes,
+            &bars,
+        )?;
+    }
+    Ok(())
+}
+
+const COLORS: [RGBColor; 8] = [
+    RGBColor(31, 119, 180),
+    RGBColor(255, 127, 14),
+    RGBColor(44, 160, 44),
+    RGBColor(214, 39, 40),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(127, 127, 127),
+];
+
+/// Two panels (success, completion): a group of bars per lane, a bar per
+/// method, the 95 % interval as a whisker; missing cells leave a gap.
+fn bar_chart(
+    path: &Path,
+    title: &str,
+    methods: &[String],
+    lanes: &[String],
+    cells: &[Vec<Option<&Row>>],
+) -> Result<(), BenchmarkError> {
+    crate::plot::register_font()?;
+    let (w, h) = (160 * lanes.len() as u32 + 200, 760u32);
+    let mut rgb = vec![0u8; (w * h * 3) as usize];
+    let draw = |e: &dyn std::fmt::Display| BenchmarkError::Invalid {
+        path: path.to_path_buf(),
+        message: format!("drawing: {e}"),
+    };
+    {
+        let root = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| draw(&e))?;
+        let root = root
+            .titled(title, ("sans-serif", 22))
+            .map_err(|e| draw(&e))?;
+        let panels = root.split_evenly((2, 1));
+        let n = methods.len().max(1) as f64;
+        for (p, area) in panels.iter().enumerate() {
+            let what = if p == 0 { "success %" } else { "completion %" };
+            let mut chart = ChartBuilder::on(area)
+                .margin(10)
+                .x_label_area_size(if p == 1 { 40 } else { 10 })
+                .y_label_area_size(50)
+                .build_cartesian_2d(0f64..lanes.len() as f64, 0f64..105f64)
+                .map_err(|e| draw(&e))?;
+            chart
+                .configure_mesh()
+                .disable_x_mesh()
+                .light_line_style(WHITE)
+                .y_labels(6)
+                .x_labels(lanes.len() * 2 + 1)
+                .x_label_formatter(&|x| {
+                    let i = (x - 0.5).round();
+                    if (x - 0.5 - i).abs() < 1e-6 && i >= 0.0 && (i as usize) < lanes.len() {
+                        lanes[i as usize].clone()
+                    } else {
+                        String::new()
+                    }
+                })
+                .y_desc(what)
+                .draw()
+                .map_err(|e| draw(&e))?;
+            for (mi, row) in cells.iter().enumerate() {
+                let color = COLORS[mi % COLORS.len()];
+                for (li, r) in row.iter().enumerate() {
+                    let Some(r) = r else { continue };
+                    let (v, lo, hi) = if p == 0 {
+                        (r.success_rate, r.success_lo, r.success_hi)
+                    } else {
+                        (r.completion_rate, r.completion_lo, r.completion_hi)
+                    };
+                    let x0 = li as f64 + 0.1 + 0.8 * mi as f64 / n;
+                    let x1 = x0 + 0.8 / n * 0.9;
+                    chart
+                        .draw_series(std::iter::once(Rectangle::new(
+                            [(x0, 0.0), (x1, 100.0 * v)],
+                            color.filled(),
+                        )))
+                        .map_err(|e| draw(&e))?;
+                    let xm = 0.5 * (x0 + x1);
+                    chart
+                        .draw_series(std::iter::once(PathElement::new(
+                            vec![(xm, 100.0 * lo), (xm, 100.0 * hi)],
+                            BLACK.stroke_width(2),
+                        )))
+                        .map_err(|e| draw(&e))?;
+                }
+            }
+            if p == 0 {
+                for (mi, m) in methods.iter().enumerate() {
+                    let color = COLORS[mi % COLORS.len()];
+                    chart
+                        .draw_series(std::iter::once(Rectangle::new(
+                            [(0.0, 0.0), (0.0, 0.0)],
+                            color.filled(),
+                        )))
+                        .map_err(|e| draw(&e))?
+                        .label(m.as_str())
+                        .legend(move |(x, y)| {
+                            Rectangle::new([(x, y - 6), (x + 14, y + 6)], color.filled())
+                        });
+                }
+                chart
+                    .configure_series_labels()
+                    .background_style(WHITE.mix(0.85))
+                    .border_style(BLACK)
+                    .position(SeriesLabelPosition::UpperRight)
+                    .draw()
+                    .map_err(|e| draw(&e))?;
+            }
+        }
+        root.present().map_err(|e| draw(&e))?;
+    }
+    crate::plot::write_png(path, w, h, &rgb)?;
+    Ok(())
+}
