@@ -339,6 +339,13 @@ impl Renderer {
             }
         }
         self.data.forward();
+        // MuJoCo 2.2.2 eases a tracking camera's look-at point toward the body
+        // over several frames (3.x puts it there at once): starting each frame
+        // on the body gives the same picture in both and no glide at the start
+        let track = self.camera.trackbodyid as usize;
+        if let Some(com) = self.data.subtree_com().get(track) {
+            self.camera.lookat = *com;
+        }
         let viewport = sys::mjrRect {
             left: 0,
             bottom: 0,
