@@ -69,6 +69,18 @@ fn pct(v: f64) -> String {
     }
 }
 
+/// The row measuring (table, method, lane, level), if there is one.
+fn find<'a>(
+    rows: &'a [Row],
+    table: Table,
+    method: &str,
+    lane: &str,
+    level: usize,
+) -> Option<&'a Row> {
+    rows.iter()
+        .find(|r| r.table == table && r.method == method && r.lane == lane && r.level == level)
+}
+
 /// Our cell as `success [lo–hi] · completion`, or a dash.
 fn cell_text(r: Option<&Row>) -> String {
     match r {
@@ -111,14 +123,7 @@ pub fn markdown(cfg: &BenchmarkConfig, rows: &[Row]) -> String {
             for m in &cfg.methods {
                 let cells: Vec<String> = lanes
                     .iter()
-                    .map(|lane| {
-                        cell_text(rows.iter().find(|r| {
-                            r.table == *table
-                                && r.method == m.name
-                                && &r.lane == lane
-                                && r.level == *level
-                        }))
-                    })
+                    .map(|lane| cell_text(find(rows, *table, &m.name, lane, *level)))
                     .collect();
                 let _ = writeln!(md, "| {} | {} |", m.name, cells.join(" | "));
             }
@@ -169,16 +174,21 @@ pub fn write(cfg: &BenchmarkConfig, rows: &[Row], out: &Path) -> Result<(), Benc
     for table in &cfg.tables {
         let lanes = table.lane_names();
         let methods: Vec<String> = cfg.methods.iter().map(|m| m.name.clone()).collect();
-        let find = |m: &str, lane: &str| {
-            rows.iter()
-                .find(|r| r.table == *table && r.method == m && r.lane == lane && r.level == level)
-        };
-        let success: Vec<Vec<f64>> = methods
+        // a row per method, a cell per lane
+        let cells: Vec<Vec<Option<&Row>>> = methods
             .iter()
             .map(|m| {
                 lanes
                     .iter()
-                    .map(|l| find(m, l).map_or(f64::NAN, |r| r.success_rate))
+                    .map(|l| find(rows, *table, m, l, level))
+                    .collect()
+            })
+            .collect();
+        let success: Vec<Vec<f64>> = cells
+            .iter()
+            .map(|row| {
+                row.iter()
+                    .map(|r| r.map_or(f64::NAN, |r| r.success_rate))
                     .collect()
             })
             .collect();
@@ -189,16 +199,12 @@ pub fn write(cfg: &BenchmarkConfig, rows: &[Row], out: &Path) -> Result<(), Benc
             &lanes,
             &success,
         )?;
-        let bars: Vec<Vec<Option<&Row>>> = methods
-            .iter()
-            .map(|m| lanes.iter().map(|l| find(m, l)).collect())
-            .collect();
         bar_chart(
             &out.join(format!("{}_bars.png", table.name())),
             &format!("{} terrains, level {level}", table.name()),
             &methods,
             &lanes,
-            &bars,
+            &cells,
         )?;
     }
     Ok(())

@@ -548,7 +548,7 @@ pub fn write_bundle(ck: &Checkpoint, dir: &Path, onnx: bool) -> Result<BundleInf
         timing: TimingSpec {
             physics_dt: env.sim.timestep,
             decimation: env.sim.decimation,
-            control_dt: env.sim.timestep * env.sim.decimation as f64,
+            control_dt: env.sim.control_dt(),
         },
         joints,
         action: ActionSpec {

@@ -123,6 +123,13 @@ impl Integrator {
     }
 }
 
+impl SimConfig {
+    /// The control period (s): `timestep x decimation`.
+    pub fn control_dt(&self) -> f64 {
+        self.timestep * self.decimation as f64
+    }
+}
+
 impl Default for SimConfig {
     fn default() -> Self {
         SimConfig {

@@ -56,7 +56,7 @@ impl EnvShared {
     pub fn new(cfg: EnvConfig, scene: Scene) -> Result<EnvShared, EnvError> {
         cfg.validate()?;
         let rewards = rewards::RewardSet::new(&cfg.rewards).map_err(EnvError::Rewards)?;
-        let dt = cfg.sim.timestep * cfg.sim.decimation as f64;
+        let dt = cfg.sim.control_dt();
         let steps = |s: f64| ((s / dt).round() as u64).max(1);
         let dr = &cfg.domain_rand;
         Ok(EnvShared {

@@ -188,10 +188,7 @@ pub fn evaluate_in(
         for k in 0..lanes {
             let count = o.episodes / lanes + usize::from(k < o.episodes % lanes);
             let seed = o.seed.wrapping_add(k as u64);
-            let lane = match o.then {
-                None => eval_lane(cfg, o.terrain, level, seed)?,
-                Some(then) => eval_combined_lane(cfg, o.terrain, then, level, seed)?,
-            };
+            let lane = eval_lane_then(cfg, o.terrain, o.then, level, seed)?;
             let mut lane_cfg = env_cfg.clone();
             lane_cfg.n_envs = env_cfg.n_envs.min(count as i64);
             lane_cfg.seed = o.seed.wrapping_add(1000 * k as u64);
@@ -242,6 +239,18 @@ pub fn eval_lane(
     level: usize,
     seed: u64,
 ) -> Result<Lane, RlError> {
+    eval_lane_then(cfg, kind, None, level, seed)
+}
+
+/// [`eval_lane`], or with `then` the combined lane: `first` in the first half
+/// of the walk, `then` in the second (each segment at least 1 m).
+pub fn eval_lane_then(
+    cfg: &ExperimentConfig,
+    first: TerrainKind,
+    then: Option<TerrainKind>,
+    level: usize,
+    seed: u64,
+) -> Result<Lane, RlError> {
     let map_cfg = &cfg.eval.terrain;
     if level > map_cfg.max_level() {
         return Err(RlError::Invalid(format!(
@@ -250,46 +259,19 @@ pub fn eval_lane(
             map_cfg.max_level()
         )));
     }
-    TerrainMap::lane(
-        map_cfg,
-        kind,
-        level,
-        cfg.eval
-            .lane_length
-            .max(crate::terrain::lane::MIN_SEGMENT_LENGTH),
-        map_cfg.tile_width,
-        seed,
-    )
-    .map_err(|e| RlError::Invalid(format!("building the {} lane: {e}", kind.name())))
-}
-
-/// The combined lane `first` then `second` of `eval_lane`'s table, level and
-/// seed (`eval.lane_length` in all, half each).
-pub fn eval_combined_lane(
-    cfg: &ExperimentConfig,
-    first: TerrainKind,
-    second: TerrainKind,
-    level: usize,
-    seed: u64,
-) -> Result<Lane, RlError> {
-    let map_cfg = &cfg.eval.terrain;
-    TerrainMap::combined_lane(
-        map_cfg,
-        first,
-        second,
-        level,
-        cfg.eval
-            .lane_length
-            .max(2.0 * crate::terrain::lane::MIN_SEGMENT_LENGTH),
-        map_cfg.tile_width,
-        seed,
-    )
-    .map_err(|e| {
-        RlError::Invalid(format!(
-            "building the {} lane: {e}",
-            lane_name(first, Some(second))
-        ))
-    })
+    let segments = if then.is_some() { 2.0 } else { 1.0 };
+    let length = cfg
+        .eval
+        .lane_length
+        .max(segments * crate::terrain::lane::MIN_SEGMENT_LENGTH);
+    let width = map_cfg.tile_width;
+    match then {
+        None => TerrainMap::lane(map_cfg, first, level, length, width, seed),
+        Some(second) => {
+            TerrainMap::combined_lane(map_cfg, first, second, level, length, width, seed)
+        }
+    }
+    .map_err(|e| RlError::Invalid(format!("building the {} lane: {e}", lane_name(first, then))))
 }
 
 /// A lane's name: its kind, or `first&second` for a combined lane.

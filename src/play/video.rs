@@ -310,10 +310,9 @@ struct VideoSink<'a> {
     still_at: Option<u64>,
     renderer: Option<Renderer>,
     encoder: Option<Encoder>,
+    /// The latest frame drawn at or before `still_at` and its index: the
+    /// still, or its stand-in should the rollout end (a fall) before its time.
     still: Option<(u64, Vec<u8>)>,
-    /// The last video frame (and its index) while the still is not drawn yet.
-    last: Vec<u8>,
-    last_k: u64,
     render_s: f64,
 }
 
@@ -340,17 +339,14 @@ impl FrameSink for VideoSink<'_> {
         let t0 = Instant::now();
         let rgb = renderer.render(data)?;
         self.render_s += t0.elapsed().as_secs_f64();
-        if want_still {
-            self.still = Some((k, rgb.to_vec()));
+        if self.still_at.is_some_and(|s| k <= s) {
+            let (at, still) = self.still.get_or_insert_with(|| (k, Vec::new()));
+            *at = k;
+            still.clear();
+            still.extend_from_slice(rgb);
         }
         if k.is_multiple_of(self.stride) {
             self.encoder.as_mut().expect("made above").push(rgb)?;
-            if self.still_at.is_some() && self.still.is_none() {
-                // the still's stand-in should the rollout end before its time
-                self.last.clear();
-                self.last.extend_from_slice(rgb);
-                self.last_k = k;
-            }
         }
         Ok(())
     }
@@ -365,8 +361,7 @@ pub fn render(
 ) -> Result<RenderSummary, PlayError> {
     let format = VideoFormat::of(&o.out)?;
     check(r, format)?;
-    let sim = &ck.config()?.env.sim;
-    let dt = sim.timestep * sim.decimation as f64;
+    let dt = ck.config()?.env.sim.control_dt();
     let stride = ((1.0 / (dt * r.fps)).round() as u64).max(1);
     let fps = 1.0 / (dt * stride as f64);
     let mut sink = VideoSink {
@@ -379,8 +374,6 @@ pub fn render(
         renderer: None,
         encoder: None,
         still: None,
-        last: Vec::new(),
-        last_k: 0,
         render_s: 0.0,
     };
     let rollout = play_into(ck, o, r.mcap.as_deref(), &mut sink)?;
@@ -390,9 +383,7 @@ pub fn render(
         .ok_or_else(|| PlayError::Invalid("the rollout produced no frame to render".into()))?;
     let frames = encoder.frames;
     let video_bytes = encoder.finish(&o.out)?;
-    // a rollout that ended (a fall) before the still's time: its last frame
-    let last = (!sink.last.is_empty()).then(|| (sink.last_k, std::mem::take(&mut sink.last)));
-    let (still, still_time) = match (&r.still, sink.still.take().or(last)) {
+    let (still, still_time) = match (&r.still, sink.still.take()) {
         (Some((path, _)), Some((k, rgb))) => {
             crate::plot::write_png(path, r.width as u32, r.height as u32, &rgb)?;
             (Some(path.display().to_string()), Some(k as f64 * dt))

@@ -164,7 +164,7 @@ pub fn write_bundle(ck: &Checkpoint, dir: &Path) -> Result<UnifiedBundleInfo, Rl
         checkpoint: ck.path.display().to_string(),
         checkpoint_iteration: ck.meta.iteration,
         checkpoint_env_steps: ck.meta.env_steps,
-        control_dt: cfg.env.sim.timestep * cfg.env.sim.decimation as f64,
+        control_dt: cfg.env.sim.control_dt(),
         replan_every: u.replan_every,
         policy: PolicySpec {
             file: POLICY_FILE.into(),
