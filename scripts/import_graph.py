@@ -17,7 +17,7 @@ LAYERS = [
     ["env"],
     ["data", "rl"],
     ["world_model"],
-    ["unified"],
+    ["unified", "baselines"],
     ["eval", "collect", "play", "deploy", "bench", "sweep", "benchmark"],
     ["cli", "main"],
 ]

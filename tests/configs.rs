@@ -90,6 +90,34 @@ fn every_shipped_config_loads() {
                 assert!(wm.is_file(), "{}: {} missing", f.display(), u.world_model);
             }
         }
+        // the baselines' own sections parse, and the committed files they
+        // name exist
+        let committed = |p: &str| {
+            if p.starts_with("models/") {
+                let full = Path::new(env!("CARGO_MANIFEST_DIR")).join(p);
+                assert!(full.is_file(), "{}: {p} missing", f.display());
+            }
+        };
+        if c.dagger.is_some() {
+            let d = dreampolicy::baselines::dagger::DaggerConfig::of(&c)
+                .unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+            let mut kinds: Vec<&str> = d.teachers.keys().map(|k| k.as_str()).collect();
+            kinds.sort_unstable();
+            if !f.to_string_lossy().contains("configs/test") {
+                assert_eq!(
+                    kinds,
+                    ["bridge", "flat", "gap", "stair", "uneven"],
+                    "{}",
+                    f.display()
+                );
+                d.teachers.values().for_each(|p| committed(p));
+            }
+        }
+        if c.task == dreampolicy::rl::config::TaskKind::NoGcrl {
+            let n = dreampolicy::baselines::no_gcrl::NoGcrlConfig::of(&c)
+                .unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+            committed(&n.world_model);
+        }
     }
     // a unified section's typo is refused with the key named
     let tiny = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/test/unified_tiny.yaml");

@@ -14,6 +14,15 @@ pub enum TrainCommand {
     /// The unified policy: PPO against the world model's plans, with body-space
     /// tracking and diffusion-AMP style rewards (configs/unified/*.yaml, `task: unified`).
     Unified(TrainArgs),
+    /// The distillation baseline: a student trained online on the mixed map by
+    /// supervision from the specialist of each env's terrain, with DAgger's
+    /// schedule (configs/baselines/dagger*.yaml, a `dagger:` section).
+    Dagger(TrainArgs),
+    /// The ablation without goal-conditioned RL: checks the world model of the
+    /// config's `no_gcrl:` section against its env and writes the controller
+    /// checkpoint that `eval` and `benchmark` run (nothing is learned;
+    /// configs/baselines/no_gcrl.yaml).
+    NoGcrl(TrainArgs),
 }
 
 /// What every trainer takes.
@@ -48,7 +57,40 @@ pub fn run(which: TrainCommand) -> Result<()> {
         TrainCommand::Specialist(args) => train_specialist(args),
         TrainCommand::WorldModel(args) => train_world_model(args),
         TrainCommand::Unified(args) => train_unified(args),
+        TrainCommand::Dagger(args) => train_dagger(args),
+        TrainCommand::NoGcrl(args) => train_no_gcrl(args),
     }
+}
+
+fn train_no_gcrl(args: TrainArgs) -> Result<()> {
+    if args.resume.is_some() {
+        anyhow::bail!("train no-gcrl learns nothing, so there is nothing to resume: run it again with --config");
+    }
+    let (cfg, run_path) = train_setup(&args, &["env.threads"], dreampolicy::rl::config::load)?;
+    let meta = dreampolicy::baselines::no_gcrl::train(&cfg, &run_path)
+        .with_context(|| format!("writing the w/o-GCRL controller in {}", run_path.display()))?;
+    println!(
+        "{}",
+        serde_json::json!({
+            "checkpoint": dreampolicy::run::latest_checkpoint(&run_path),
+            "iterations": meta.iteration,
+            "env_steps": meta.env_steps,
+        })
+    );
+    Ok(())
+}
+
+fn train_dagger(args: TrainArgs) -> Result<()> {
+    let (cfg, run_path) = train_setup(
+        &args,
+        &["env.threads", "train.torch_threads"],
+        dreampolicy::rl::config::load,
+    )?;
+    let s =
+        dreampolicy::baselines::dagger::train(&cfg, &run_path, args.resume.is_some(), args.quiet)
+            .with_context(|| format!("training the DAgger student in {}", run_path.display()))?;
+    println!("{}", serde_json::to_string(&s)?);
+    Ok(())
 }
 
 fn train_unified(args: TrainArgs) -> Result<()> {

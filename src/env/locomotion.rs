@@ -142,6 +142,11 @@ impl LocoEnv {
         self.level
     }
 
+    /// The map column (terrain kind) the env is bound to (0 on a plane scene).
+    pub fn column(&self) -> usize {
+        self.col
+    }
+
     /// Domain-randomization bucket (index into `Scene::buckets`).
     pub fn bucket(&self) -> usize {
         self.bucket

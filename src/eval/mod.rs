@@ -307,10 +307,7 @@ fn run_episodes<T: EvalTask>(
     t: &mut Tally,
 ) -> Result<(), RlError> {
     let n = task.n_envs();
-    let mut agent = Agent::new(&cfg.policy, task.dims(), n, cfg.ppo.normalize_obs);
-    ck.load_agent(&mut agent)?;
-    agent.set_frozen(true);
-    agent.reset_history(&*task);
+    let mut actor = Actor::of(ck, cfg, &*task)?;
     let target = t.done + episodes;
 
     // env i runs a counted episode while counted[i]; new episodes are counted
@@ -320,7 +317,7 @@ fn run_episodes<T: EvalTask>(
     let (mut steps, mut speed) = (vec![0u64; n], vec![0.0f64; n]);
     let mut peak = vec![[Swing::default(); 2]; n];
     while t.done < target {
-        agent.step_mean(task);
+        actor.step(task);
         for i in 0..n {
             let out = task.outcomes()[i];
             let e = &task.loco().envs()[i];
@@ -368,11 +365,60 @@ fn run_episodes<T: EvalTask>(
             peak[i] = [Swing::default(); 2];
             if end == Ending::Success {
                 task.restart(i);
-                agent.reset_history_env(i, task.obs());
+                actor.restarted(i, task.obs());
             }
         }
     }
     Ok(())
+}
+
+/// What acts in an evaluation: a checkpoint's policy (its deterministic mean,
+/// through its normalizers and history), or the world model of a controller
+/// checkpoint (the w/o-GCRL baseline, `task: no_gcrl`).
+enum Actor {
+    Policy(Box<Agent>),
+    WorldModel(Box<crate::baselines::no_gcrl::WmController>),
+}
+
+impl Actor {
+    /// The actor of `ck` for `task`'s envs, started on their current states.
+    fn of(ck: &Checkpoint, cfg: &ExperimentConfig, task: &dyn VecTask) -> Result<Actor, RlError> {
+        if cfg.task == crate::rl::config::TaskKind::NoGcrl {
+            let mut c = crate::baselines::no_gcrl::WmController::new(cfg, task.n_envs())?;
+            c.reset_all(task);
+            return Ok(Actor::WorldModel(Box::new(c)));
+        }
+        let mut agent = Agent::new(
+            &cfg.policy,
+            task.dims(),
+            task.n_envs(),
+            cfg.ppo.normalize_obs,
+        );
+        ck.load_agent(&mut agent)?;
+        agent.set_frozen(true);
+        agent.reset_history(task);
+        Ok(Actor::Policy(Box::new(agent)))
+    }
+
+    /// One control step of `task`.
+    fn step(&mut self, task: &mut dyn VecTask) {
+        match self {
+            Actor::Policy(a) => {
+                a.step_mean(task);
+            }
+            Actor::WorldModel(c) => {
+                c.step(task);
+            }
+        }
+    }
+
+    /// Env `i` was restarted by the evaluation (it reached the end line).
+    fn restarted(&mut self, i: usize, obs: &[f32]) {
+        match self {
+            Actor::Policy(a) => a.reset_history_env(i, obs),
+            Actor::WorldModel(c) => c.reset_env(i, obs),
+        }
+    }
 }
 
 /// What an evaluation steps: the G1 env, or a unified policy's task around it

@@ -44,6 +44,41 @@ pub struct CheckpointMeta {
     pub penalty_scale: f64,
 }
 
+impl CheckpointMeta {
+    /// The record of a run's checkpoint taken now: `cfg` (resolved), the
+    /// task's sizes, env snapshots and penalty scale, Adam's step and rate
+    /// (`opt`; 0 without one), the run's `iteration`, env-steps and wall time,
+    /// and the window of recent episode returns and lengths (its mean return
+    /// is the record's, None while it is empty).
+    pub fn record(
+        cfg: &crate::rl::config::ExperimentConfig,
+        task: &dyn crate::env::task::VecTask,
+        opt: Option<&Adam>,
+        (iteration, env_steps, wall_time_s): (usize, u64, f64),
+        episode_window: (Vec<f64>, Vec<f64>),
+    ) -> Result<CheckpointMeta, RlError> {
+        let w = &episode_window.0;
+        let mean = (!w.is_empty()).then(|| w.iter().sum::<f64>() / w.len() as f64);
+        Ok(CheckpointMeta {
+            format: FORMAT,
+            iteration,
+            env_steps,
+            wall_time_s,
+            adam_step: opt.map_or(0, |o| o.step),
+            learning_rate: opt.map_or(0.0, |o| o.lr),
+            dims: task.dims(),
+            n_envs: task.n_envs(),
+            config: serde_yaml::to_string(cfg).map_err(|e| RlError::Invalid(e.to_string()))?,
+            snapshots: task.snapshot(),
+            mujoco_version: crate::sim::mujoco_version(),
+            libtorch_version: env!("DREAMPOLICY_LIBTORCH_VERSION").to_string(),
+            mean_return: mean.filter(|r| r.is_finite()),
+            episode_window,
+            penalty_scale: task.penalty_scale(),
+        })
+    }
+}
+
 /// What [`Checkpoint::transfer_agent`] did, tensor by tensor.
 #[derive(Debug, Clone, Default)]
 pub struct Transfer {
@@ -112,6 +147,13 @@ pub fn save(
     Ok(save_named(path, named, meta)?)
 }
 
+/// Write a controller checkpoint: `meta` (its config says how to act) and no
+/// policy tensors, for a method that learns no policy of its own (the
+/// w/o-GCRL baseline, whose actions come from its world model).
+pub fn save_controller(path: &Path, meta: &CheckpointMeta) -> Result<(), RlError> {
+    Ok(save_named(path, Vec::new(), meta)?)
+}
+
 impl Checkpoint {
     /// Read a checkpoint; a missing, truncated or foreign file is one clear error.
     pub fn read(path: &Path) -> Result<Checkpoint, RlError> {
@@ -168,6 +210,12 @@ impl Checkpoint {
 
     /// Copy the networks and normalizers into `agent` (same architecture).
     pub fn load_agent(&self, agent: &mut Agent) -> Result<(), RlError> {
+        if self.file.tensor("norm.obs").is_err() {
+            return Err(err(
+                &self.path,
+                "holds no policy: a controller checkpoint (task: no_gcrl, whose actions come from its world model); eval and benchmark run it, play, render and export read policies",
+            ));
+        }
         self.file
             .copy_into("policy", agent.policy.named_parameters())?;
         let d = agent.dims();

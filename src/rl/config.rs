@@ -32,6 +32,15 @@ pub struct ExperimentConfig {
     /// layer (`unified::config`, above the world model) parses and validates it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub unified: Option<serde_yaml::Value>,
+    /// The distillation baseline's section (`train dagger`, a `task: g1`
+    /// student): its teachers, β schedule and aggregated dataset; parsed by
+    /// `baselines::dagger`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dagger: Option<serde_yaml::Value>,
+    /// The w/o-GCRL baseline's section (`task: no_gcrl`): the world model
+    /// whose predicted actions are executed; parsed by `baselines::no_gcrl`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub no_gcrl: Option<serde_yaml::Value>,
 }
 
 /// The environment a config trains on.
@@ -47,6 +56,10 @@ pub enum TaskKind {
     /// model's plan as the policy's future input and tracking and style
     /// rewards (`unified:`); trained by `train unified`.
     Unified,
+    /// The ablation without goal-conditioned RL: no policy, the world model's
+    /// predicted next state holds the action executed (`no_gcrl:`); written
+    /// by `train no-gcrl`, run by `eval` and `benchmark`.
+    NoGcrl,
 }
 
 impl ExperimentConfig {
@@ -59,6 +72,16 @@ impl ExperimentConfig {
         if self.unified.is_some() != (self.task == TaskKind::Unified) {
             return Err(ConfigError::Invalid(
                 "a `unified:` section goes with `task: unified`, and only with it".into(),
+            ));
+        }
+        if self.no_gcrl.is_some() != (self.task == TaskKind::NoGcrl) {
+            return Err(ConfigError::Invalid(
+                "a `no_gcrl:` section goes with `task: no_gcrl`, and only with it".into(),
+            ));
+        }
+        if self.dagger.is_some() && self.task != TaskKind::G1 {
+            return Err(ConfigError::Invalid(
+                "a `dagger:` section trains a G1 student: it goes with `task: g1`".into(),
             ));
         }
         self.eval.validate()

@@ -46,8 +46,9 @@ pub struct PhaseTimes {
 
 pub use crate::run::latest_checkpoint;
 
-/// Episode statistics over a window of recent episodes.
-struct EpisodeStats {
+/// Episode statistics: each env's running return and length, and the window
+/// of the last 100 finished episodes (what the logs and checkpoints report).
+pub struct EpisodeStats {
     ret: Vec<f64>,
     len: Vec<u64>,
     window_ret: VecDeque<f64>,
@@ -55,18 +56,48 @@ struct EpisodeStats {
 }
 
 impl EpisodeStats {
-    fn new(n: usize) -> EpisodeStats {
+    /// `n` envs, the window empty or (resume) a checkpoint's `episode_window`.
+    pub fn new(n: usize, window: Option<&(Vec<f64>, Vec<f64>)>) -> EpisodeStats {
+        let (r, l) = window.cloned().unwrap_or_default();
         EpisodeStats {
             ret: vec![0.0; n],
             len: vec![0; n],
-            window_ret: VecDeque::new(),
-            window_len: VecDeque::new(),
+            window_ret: r.into(),
+            window_len: l.into(),
         }
     }
-    fn reset(&mut self) {
+
+    /// Every env starts a new episode (the window stays).
+    pub fn reset(&mut self) {
         self.ret.iter_mut().for_each(|r| *r = 0.0);
         self.len.iter_mut().for_each(|l| *l = 0);
     }
+
+    /// Env `i` got `reward` this step; `done`: its episode ended with it.
+    pub fn add(&mut self, i: usize, reward: f64, done: bool) {
+        self.ret[i] += reward;
+        self.len[i] += 1;
+        if done {
+            push_window(&mut self.window_ret, self.ret[i]);
+            push_window(&mut self.window_len, self.len[i] as f64);
+            self.ret[i] = 0.0;
+            self.len[i] = 0;
+        }
+    }
+
+    /// Mean return and length over the window (NaN while it is empty).
+    pub fn means(&self) -> (f64, f64) {
+        (Self::mean(&self.window_ret), Self::mean(&self.window_len))
+    }
+
+    /// The window, for a checkpoint's record.
+    pub fn window(&self) -> (Vec<f64>, Vec<f64>) {
+        (
+            self.window_ret.iter().copied().collect(),
+            self.window_len.iter().copied().collect(),
+        )
+    }
+
     fn mean(v: &VecDeque<f64>) -> f64 {
         if v.is_empty() {
             f64::NAN
@@ -149,11 +180,7 @@ impl<'a, T: VecTask> Trainer<'a, T> {
             task.reset_all();
             (iteration, env_steps, wall_offset) = (m.iteration, m.env_steps, m.wall_time_s);
         }
-        let mut stats = EpisodeStats::new(n);
-        if let Some(ck) = resume {
-            stats.window_ret = ck.meta.episode_window.0.iter().copied().collect();
-            stats.window_len = ck.meta.episode_window.1.iter().copied().collect();
-        }
+        let stats = EpisodeStats::new(n, resume.map(|ck| &ck.meta.episode_window));
         agent.check_task(&*task).map_err(RlError::Invalid)?;
         agent.reset_history(&*task);
         let storage = RolloutStorage::new(
@@ -217,15 +244,10 @@ impl<'a, T: VecTask> Trainer<'a, T> {
                 }
                 rewards[i] = r;
                 dones[i] = o.episode_done as u8 as f32;
-                self.stats.ret[i] += o.reward as f64;
-                self.stats.len[i] += 1;
+                self.stats.add(i, o.reward as f64, o.episode_done);
                 if o.episode_done {
                     rs.episodes += 1;
                     rs.falls += o.terminated as usize;
-                    push_window(&mut self.stats.window_ret, self.stats.ret[i]);
-                    push_window(&mut self.stats.window_len, self.stats.len[i] as f64);
-                    self.stats.ret[i] = 0.0;
-                    self.stats.len[i] = 0;
                 }
             }
             if let Some(terms) = self.task.finished_episode_terms() {
@@ -287,8 +309,7 @@ impl<'a, T: VecTask> Trainer<'a, T> {
                 }
             })
             .collect();
-        rs.mean_return = EpisodeStats::mean(&self.stats.window_ret);
-        rs.mean_length = EpisodeStats::mean(&self.stats.window_len);
+        (rs.mean_return, rs.mean_length) = self.stats.means();
         rs.level = self.task.mean_level();
         rs.penalty_scale = self.task.penalty_scale();
         if let Some(pc) = &self.cfg.env.rewards.penalty_curriculum {
@@ -315,27 +336,13 @@ impl<'a, T: VecTask> Trainer<'a, T> {
 
     /// Write the resume checkpoint, then start every env on a new episode (module doc).
     pub fn checkpoint(&mut self, path: &Path, wall: f64) -> Result<(), RlError> {
-        let meta = CheckpointMeta {
-            format: checkpoint::FORMAT,
-            iteration: self.iteration,
-            env_steps: self.env_steps,
-            wall_time_s: self.wall_offset + wall,
-            adam_step: self.ppo.opt.step,
-            learning_rate: self.ppo.opt.lr,
-            dims: self.task.dims(),
-            n_envs: self.task.n_envs(),
-            config: serde_yaml::to_string(&self.cfg)
-                .map_err(|e| RlError::Invalid(e.to_string()))?,
-            snapshots: self.task.snapshot(),
-            mujoco_version: crate::sim::mujoco_version(),
-            libtorch_version: env!("DREAMPOLICY_LIBTORCH_VERSION").to_string(),
-            mean_return: Some(EpisodeStats::mean(&self.stats.window_ret)).filter(|r| r.is_finite()),
-            episode_window: (
-                self.stats.window_ret.iter().copied().collect(),
-                self.stats.window_len.iter().copied().collect(),
-            ),
-            penalty_scale: self.task.penalty_scale(),
-        };
+        let meta = CheckpointMeta::record(
+            &self.cfg,
+            &*self.task,
+            Some(&self.ppo.opt),
+            (self.iteration, self.env_steps, self.wall_offset + wall),
+            self.stats.window(),
+        )?;
         checkpoint::save(
             path,
             &self.agent,
@@ -360,6 +367,32 @@ fn push_window(w: &mut VecDeque<f64>, v: f64) {
         w.pop_front();
     }
     w.push_back(v);
+}
+
+/// Whether a run checkpoints after iteration `it`: every `save_interval`
+/// iterations, and at the last (`iterations`).
+pub fn checkpoint_due(train: &crate::rl::config::TrainConfig, it: usize) -> bool {
+    let si = train.save_interval;
+    (si > 0 && it.is_multiple_of(si)) || it == train.iterations
+}
+
+/// What follows a checkpoint written after iteration `it`: a kept copy every
+/// `keep_interval` iterations, and the training curves drawn by `plot` (a
+/// failure to draw is logged, not fatal).
+pub fn after_checkpoint(
+    run: &mut RunDir,
+    train: &crate::rl::config::TrainConfig,
+    it: usize,
+    plot: impl Fn(&Path) -> Result<PathBuf, crate::plot::PlotError>,
+) -> Result<(), RlError> {
+    let ki = train.keep_interval;
+    if ki > 0 && it.is_multiple_of(ki) {
+        crate::run::keep_checkpoint(run.path(), it)?;
+    }
+    if let Err(e) = plot(run.path()) {
+        run.log(&format!("plots not drawn: {e}"))?;
+    }
+    Ok(())
 }
 
 /// What one iteration's rollout saw.
@@ -465,16 +498,9 @@ pub fn learn<T: VecTask>(
                 tr.times.update - before.update
             ),
         );
-        let si = cfg.train.save_interval;
-        if (si > 0 && tr.iteration % si == 0) || tr.iteration == total {
+        if checkpoint_due(&cfg.train, tr.iteration) {
             tr.checkpoint(&ckpt, start.elapsed().as_secs_f64())?;
-            let ki = cfg.train.keep_interval;
-            if ki > 0 && tr.iteration % ki == 0 {
-                crate::run::keep_checkpoint(run.path(), tr.iteration)?;
-            }
-            if let Err(e) = plot_run(run.path()) {
-                run.log(&format!("plots not drawn: {e}"))?;
-            }
+            after_checkpoint(run, &cfg.train, tr.iteration, plot_run)?;
             run.log(&format!(
                 "iteration {} env_steps {} wall {:.0}s return {:.3} length {:.1}: checkpoint {}",
                 tr.iteration,
@@ -515,6 +541,9 @@ pub fn train(
 ) -> Result<TrainSummary, RlError> {
     use crate::rl::config::TaskKind;
     match cfg.task {
+        TaskKind::G1 if cfg.dagger.is_some() => Err(RlError::Invalid(
+            "a config with a `dagger:` section trains with `dreampolicy train dagger`".into(),
+        )),
         TaskKind::G1 => {
             let mut env = crate::env::VecEnv::new(&cfg.env)?;
             train_task(cfg, &mut env, run_dir, resume, quiet)
@@ -526,6 +555,9 @@ pub fn train(
         }
         TaskKind::Unified => Err(RlError::Invalid(
             "task: unified trains with `dreampolicy train unified`".into(),
+        )),
+        TaskKind::NoGcrl => Err(RlError::Invalid(
+            "task: no_gcrl is written by `dreampolicy train no-gcrl`".into(),
         )),
     }
 }

@@ -241,6 +241,20 @@ impl TerrainMap {
         }
     }
 
+    /// The tile `(level, col)` that world `(x, y)` lies in; `None` on the
+    /// border or off the map.
+    pub fn tile_at(&self, x: f64, y: f64) -> Option<(usize, usize)> {
+        let [tx, ty] = self.layout.tile;
+        let b = self.layout.border as f64 * self.hs;
+        let fx = (x - b) / (tx as f64 * self.hs);
+        let fy = (y - b) / (ty as f64 * self.hs);
+        if !(fx >= 0.0 && fy >= 0.0) {
+            return None;
+        }
+        let (row, col) = (fx as usize, fy as usize);
+        (row < self.layout.rows && col < self.layout.cols).then_some((row, col))
+    }
+
     /// Spawn point of tile `(level, col)`: 1 m into the tile, on its centre line,
     /// at ground height. Panics outside the map.
     pub fn spawn(&self, level: usize, col: usize) -> [f64; 3] {

@@ -148,3 +148,31 @@ impl Plan {
         &self.buf
     }
 }
+
+/// One batched world-model call for the envs `due`: their histories and their
+/// rows of `scan` (`[n, SCAN_DIM]` scandots) in, `due.len() * H * S` predicted
+/// states out, in `due`'s order; NaN states where the call fails.
+pub fn predict_due(
+    wm: &crate::world_model::WorldModel,
+    history: &History,
+    scan: &[f32],
+    due: &[usize],
+    sampling: &crate::world_model::config::SamplingConfig,
+    noise: &mut crate::world_model::sampler::Noise,
+) -> Vec<f32> {
+    use crate::env::obs::SCAN_DIM;
+    let (k, d) = (history.len(), history.dim);
+    let b = due.len() as i64;
+    let mut hist = Vec::with_capacity(due.len() * k * d);
+    let mut scans = Vec::with_capacity(due.len() * SCAN_DIM);
+    for &i in due {
+        hist.extend_from_slice(history.row(i));
+        scans.extend_from_slice(&scan[i * SCAN_DIM..(i + 1) * SCAN_DIM]);
+    }
+    let hist = tch::Tensor::from_slice(&hist).view([b, k as i64, d as i64]);
+    let scans = tch::Tensor::from_slice(&scans).view([b, SCAN_DIM as i64]);
+    wm.predict(&hist, &scans, sampling, noise)
+        .ok()
+        .and_then(|p| Vec::<f32>::try_from(p.to_kind(tch::Kind::Float).flatten(0, -1)).ok())
+        .unwrap_or_else(|| vec![f32::NAN; due.len() * wm.horizon() * d])
+}

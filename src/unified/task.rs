@@ -282,22 +282,15 @@ impl UnifiedTask {
         }
         let t0 = std::time::Instant::now();
         let (k, h, d) = (self.history.len(), self.plan.horizon(), OBS_DIM);
-        let b = due.len() as i64;
-        let mut hist = Vec::with_capacity(due.len() * k * d);
-        let mut scan = Vec::with_capacity(due.len() * SCAN_DIM);
-        for &i in &due {
-            hist.extend_from_slice(self.history.row(i));
-            scan.extend_from_slice(&self.env.scan[i * SCAN_DIM..(i + 1) * SCAN_DIM]);
-        }
-        let hist = Tensor::from_slice(&hist).view([b, k as i64, d as i64]);
-        let scan = Tensor::from_slice(&scan).view([b, SCAN_DIM as i64]);
         // the shapes were checked when the task was built
-        let pred: Vec<f32> = self
-            .wm
-            .predict(&hist, &scan, &self.cfg.sampling, &mut self.noise)
-            .ok()
-            .and_then(|p| Vec::<f32>::try_from(p.to_kind(Kind::Float).flatten(0, -1)).ok())
-            .unwrap_or_else(|| vec![f32::NAN; due.len() * h * d]);
+        let pred = super::plan::predict_due(
+            &self.wm,
+            &self.history,
+            &self.env.scan,
+            &due,
+            &self.cfg.sampling,
+            &mut self.noise,
+        );
         let mut held = vec![0.0f32; h * d];
         for (j, &i) in due.iter().enumerate() {
             let newest = &self.history.row(i)[(k - 1) * d..];

@@ -203,3 +203,19 @@ pub fn metrics_table(dir: &std::path::Path) -> dreampolicy::plot::MetricsTable {
 pub fn metrics_column(dir: &std::path::Path, name: &str) -> Vec<f64> {
     metrics_table(dir).column(name).unwrap().to_vec()
 }
+
+/// `eval`'s options for `episodes` flat lanes on the checkpoint's training
+/// scene, seed 0, one thread.
+pub fn flat_eval(episodes: usize) -> dreampolicy::eval::EvalOptions {
+    dreampolicy::eval::EvalOptions {
+        terrain: dreampolicy::terrain::TerrainKind::Flat,
+        then: None,
+        episodes,
+        full_collision: false,
+        seed: 0,
+        threads: 1,
+        level: None,
+        table: Default::default(),
+        lane_lookahead: None,
+    }
+}
