@@ -20,7 +20,7 @@
 //! * [`collect`] the expert dataset's collection: specialists rolled out into MCAP shards
 //! * [`bench`] the `dreampolicy bench ...` measurements
 //! * [`sweep`] config-driven sweeps: sweep files, their runs, the task body, Slurm arrays, collection
-//! * [`baselines`] the paper's comparison methods as trainer modes: DAgger distillation
+//! * [`baselines`] the paper's comparison methods as trainer modes: DAgger distillation, without GCRL, without diffusion
 //! * [`benchmark`] the paper's comparison: methods x single, unseen and combined lanes, Wilson intervals, the report
 pub mod baselines;
 pub mod bench;

@@ -87,15 +87,11 @@ impl DaggerConfig {
                 "train dagger trains a G1 student: set `task: g1` (the default)".into(),
             ));
         }
-        let value = cfg.dagger.clone().ok_or_else(|| {
-            ConfigError::Invalid(
-                "train dagger needs a `dagger:` section (teachers, beta_iterations, buffer_size, updates, batch, learning_rate)".into(),
-            )
-        })?;
-        let d: DaggerConfig = serde_yaml::from_value(value).map_err(|e| ConfigError::Parse {
-            path: "dagger".into(),
-            message: e.to_string(),
-        })?;
+        let d: DaggerConfig = crate::rl::config::parse_section(
+            &cfg.dagger,
+            "dagger",
+            "train dagger needs a `dagger:` section (teachers, beta_iterations, buffer_size, updates, batch, learning_rate)",
+        )?;
         d.validate()?;
         Ok(d)
     }

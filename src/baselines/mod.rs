@@ -7,6 +7,10 @@
 //!   (`train dagger`);
 //! * [`no_gcrl`]: the ablation without goal-conditioned RL: the world model's
 //!   predicted next state holds the action executed (`train no-gcrl` writes
-//!   the controller, `eval` runs it).
+//!   the controller, `eval` runs it);
+//! * [`no_diffusion`]: the ablation without the diffusion world model: PPO
+//!   with a standard AMP discriminator on the expert dataset's transitions
+//!   (`train no-diffusion`).
 pub mod dagger;
+pub mod no_diffusion;
 pub mod no_gcrl;

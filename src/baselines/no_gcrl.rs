@@ -59,13 +59,11 @@ impl NoGcrlConfig {
                 "not a w/o-GCRL config: set `task: no_gcrl` and a `no_gcrl:` section".into(),
             ));
         }
-        let value = cfg.no_gcrl.clone().ok_or_else(|| {
-            ConfigError::Invalid("task: no_gcrl needs a `no_gcrl:` section".into())
-        })?;
-        let c: NoGcrlConfig = serde_yaml::from_value(value).map_err(|e| ConfigError::Parse {
-            path: "no_gcrl".into(),
-            message: e.to_string(),
-        })?;
+        let c: NoGcrlConfig = crate::rl::config::parse_section(
+            &cfg.no_gcrl,
+            "no_gcrl",
+            "task: no_gcrl needs a `no_gcrl:` section",
+        )?;
         if c.world_model.trim().is_empty() {
             return Err(ConfigError::Invalid(
                 "no_gcrl.world_model names no checkpoint".into(),

@@ -23,6 +23,10 @@ pub enum TrainCommand {
     /// checkpoint that `eval` and `benchmark` run (nothing is learned;
     /// configs/baselines/no_gcrl.yaml).
     NoGcrl(TrainArgs),
+    /// The ablation without the diffusion world model: PPO with a standard AMP
+    /// discriminator whose real transitions come from the expert dataset
+    /// (configs/baselines/no_diffusion.yaml, `task: no_diffusion`).
+    NoDiffusion(TrainArgs),
 }
 
 /// What every trainer takes.
@@ -59,7 +63,30 @@ pub fn run(which: TrainCommand) -> Result<()> {
         TrainCommand::Unified(args) => train_unified(args),
         TrainCommand::Dagger(args) => train_dagger(args),
         TrainCommand::NoGcrl(args) => train_no_gcrl(args),
+        TrainCommand::NoDiffusion(args) => train_no_diffusion(args),
     }
+}
+
+fn train_no_diffusion(args: TrainArgs) -> Result<()> {
+    let (cfg, run_path) = train_setup(
+        &args,
+        &["env.threads", "train.torch_threads"],
+        dreampolicy::rl::config::load,
+    )?;
+    let s = dreampolicy::baselines::no_diffusion::train(
+        &cfg,
+        &run_path,
+        args.resume.is_some(),
+        args.quiet,
+    )
+    .with_context(|| {
+        format!(
+            "training the w/o-diffusion policy in {}",
+            run_path.display()
+        )
+    })?;
+    println!("{}", serde_json::to_string(&s)?);
+    Ok(())
 }
 
 fn train_no_gcrl(args: TrainArgs) -> Result<()> {

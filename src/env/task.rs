@@ -123,6 +123,56 @@ pub trait VecTask {
     }
 }
 
+/// Inside `impl VecTask for T`, where `T` wraps the G1 env in its field
+/// `$env` (a [`VecEnv`]): the methods that pass through to it unchanged
+/// (sizes, the actor state and critic rows, snapshots, reward terms, tracking
+/// errors, curriculum level, penalty scale, episode length). The wrapper
+/// writes the rest: dims, scan rows, outcomes, step, reset and its own state.
+macro_rules! delegate_to_env {
+    ($env:ident) => {
+        fn n_envs(&self) -> usize {
+            self.$env.n_envs()
+        }
+        fn obs(&self) -> &[f32] {
+            &self.$env.obs
+        }
+        fn critic(&self) -> &[f32] {
+            &self.$env.critic
+        }
+        fn final_critic(&self) -> &[f32] {
+            &self.$env.final_critic
+        }
+        fn snapshot(&self) -> Vec<$crate::env::task::EnvSnapshot> {
+            self.$env.snapshot()
+        }
+        fn restore(&mut self, snaps: &[$crate::env::task::EnvSnapshot]) -> Result<(), String> {
+            self.$env.restore(snaps)
+        }
+        fn reward_names(&self) -> Vec<&'static str> {
+            $crate::env::task::VecTask::reward_names(&self.$env)
+        }
+        fn finished_episode_terms(&self) -> Option<Vec<(&'static str, f64)>> {
+            $crate::env::task::VecTask::finished_episode_terms(&self.$env)
+        }
+        fn tracking_errors(&self) -> [f64; 2] {
+            $crate::env::task::VecTask::tracking_errors(&self.$env)
+        }
+        fn mean_level(&self) -> f64 {
+            self.$env.mean_terrain_level()
+        }
+        fn penalty_scale(&self) -> f64 {
+            $crate::env::task::VecTask::penalty_scale(&self.$env)
+        }
+        fn set_penalty_scale(&mut self, scale: f64) {
+            self.$env.set_penalty_scale(scale)
+        }
+        fn max_episode_steps(&self) -> u64 {
+            self.$env.shared().max_episode_steps
+        }
+    };
+}
+pub(crate) use delegate_to_env;
+
 impl VecTask for VecEnv {
     fn dims(&self) -> TaskDims {
         use crate::env::obs::{CRITIC_DIM, OBS_DIM, SCAN_DIM};

@@ -41,6 +41,11 @@ pub struct ExperimentConfig {
     /// whose predicted actions are executed; parsed by `baselines::no_gcrl`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub no_gcrl: Option<serde_yaml::Value>,
+    /// The w/o-diffusion baseline's section (`task: no_diffusion`): the expert
+    /// dataset and the standard AMP discriminator; parsed by
+    /// `baselines::no_diffusion`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub no_diffusion: Option<serde_yaml::Value>,
 }
 
 /// The environment a config trains on.
@@ -60,6 +65,10 @@ pub enum TaskKind {
     /// predicted next state holds the action executed (`no_gcrl:`); written
     /// by `train no-gcrl`, run by `eval` and `benchmark`.
     NoGcrl,
+    /// The ablation without the diffusion world model: the G1 env with a
+    /// standard AMP discriminator whose real transitions come from the expert
+    /// dataset (`no_diffusion:`); trained by `train no-diffusion`.
+    NoDiffusion,
 }
 
 impl ExperimentConfig {
@@ -79,6 +88,11 @@ impl ExperimentConfig {
                 "a `no_gcrl:` section goes with `task: no_gcrl`, and only with it".into(),
             ));
         }
+        if self.no_diffusion.is_some() != (self.task == TaskKind::NoDiffusion) {
+            return Err(ConfigError::Invalid(
+                "a `no_diffusion:` section goes with `task: no_diffusion`, and only with it".into(),
+            ));
+        }
         if self.dagger.is_some() && self.task != TaskKind::G1 {
             return Err(ConfigError::Invalid(
                 "a `dagger:` section trains a G1 student: it goes with `task: g1`".into(),
@@ -86,6 +100,24 @@ impl ExperimentConfig {
         }
         self.eval.validate()
     }
+}
+
+/// A task's own section of an experiment file (`unified:`, `dagger:`, ...),
+/// kept as YAML in [`ExperimentConfig`] and parsed by its layer: `value`
+/// deserialized as `T`, errors naming the section; a missing one is the error
+/// `missing` (what the section must say).
+pub fn parse_section<T: serde::de::DeserializeOwned>(
+    value: &Option<serde_yaml::Value>,
+    name: &str,
+    missing: &str,
+) -> Result<T, ConfigError> {
+    let value = value
+        .clone()
+        .ok_or_else(|| ConfigError::Invalid(missing.to_string()))?;
+    serde_yaml::from_value(value).map_err(|e| ConfigError::Parse {
+        path: name.into(),
+        message: e.to_string(),
+    })
 }
 
 /// Read `path`, apply `--set key.path=value` overrides, deserialize, validate.

@@ -559,6 +559,9 @@ pub fn train(
         TaskKind::NoGcrl => Err(RlError::Invalid(
             "task: no_gcrl is written by `dreampolicy train no-gcrl`".into(),
         )),
+        TaskKind::NoDiffusion => Err(RlError::Invalid(
+            "task: no_diffusion trains with `dreampolicy train no-diffusion`".into(),
+        )),
     }
 }
 

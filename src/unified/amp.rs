@@ -52,6 +52,25 @@ impl Default for AmpConfig {
     }
 }
 
+impl AmpConfig {
+    /// Why the section cannot train a discriminator, if it cannot.
+    pub fn check(&self) -> Result<(), String> {
+        if self.updates == 0
+            || self.batch == 0
+            || self.hidden.is_empty()
+            || self.hidden.iter().any(|&h| h < 1)
+        {
+            return Err("updates, batch and every hidden size must be at least 1".into());
+        }
+        if !(self.learning_rate > 0.0 && self.grad_penalty >= 0.0 && self.logit_reg >= 0.0) {
+            return Err(
+                "learning_rate must be positive, grad_penalty and logit_reg not negative".into(),
+            );
+        }
+        Ok(())
+    }
+}
+
 /// What one discriminator update measured.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct AmpStats {
@@ -177,5 +196,109 @@ impl Discriminator {
             d_fake: f(&df.mean(Kind::Float)),
             accuracy: f(&acc),
         }
+    }
+
+    /// `updates` updates on batches of `batch` rows drawn uniformly (with
+    /// replacement) from `real` and `fake` (feature rows), the draws seeded by
+    /// `seed` and Adam's step; the mean of their [`AmpStats`], or NaNs when
+    /// either side is empty.
+    pub fn train_on(&mut self, real: &[f32], fake: &[f32], seed: u64) -> AmpStats {
+        use rand::{Rng, SeedableRng};
+        let row = 2 * AMP_DIM;
+        let (nr, nf) = (real.len() / row, fake.len() / row);
+        if nr == 0 || nf == 0 {
+            let nan = f64::NAN;
+            return AmpStats {
+                loss: nan,
+                grad_penalty: nan,
+                d_real: nan,
+                d_fake: nan,
+                accuracy: nan,
+            };
+        }
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(
+            seed ^ (self.adam.step as u64).wrapping_mul(0x9E37_79B9),
+        );
+        let (b, updates) = (self.cfg.batch, self.cfg.updates);
+        let mut mean = AmpStats::default();
+        for _ in 0..updates {
+            let mut pick = |src: &[f32], n: usize| {
+                let mut out = Vec::with_capacity(b * row);
+                for _ in 0..b {
+                    let j = rng.random_range(0..n);
+                    out.extend_from_slice(&src[j * row..(j + 1) * row]);
+                }
+                out
+            };
+            let r = pick(real, nr);
+            let f = pick(fake, nf);
+            let s = self.update(&r, &f);
+            mean.loss += s.loss;
+            mean.grad_penalty += s.grad_penalty;
+            mean.d_real += s.d_real;
+            mean.d_fake += s.d_fake;
+            mean.accuracy += s.accuracy;
+        }
+        let u = updates as f64;
+        AmpStats {
+            loss: mean.loss / u,
+            grad_penalty: mean.grad_penalty / u,
+            d_real: mean.d_real / u,
+            d_fake: mean.d_fake / u,
+            accuracy: mean.accuracy / u,
+        }
+    }
+
+    /// The weights, Adam's moments and step and the input statistics, by name
+    /// (`amp.<name>`: what a task saves in its checkpoint).
+    pub fn named_tensors(&self) -> Vec<(String, Tensor)> {
+        let mut out: Vec<(String, Tensor)> = self
+            .vs
+            .variables()
+            .into_iter()
+            .map(|(k, v)| (format!("amp.{k}"), v.detach()))
+            .collect();
+        for (k, v) in self.adam.named_moments() {
+            out.push((format!("amp.{k}"), v));
+        }
+        out.push((
+            "amp.adam_step".into(),
+            Tensor::from_slice(&[self.adam.step]),
+        ));
+        out.push(("amp.norm".into(), Tensor::from_slice(&self.norm.to_vec())));
+        out
+    }
+
+    /// Copy in what [`Discriminator::named_tensors`] saved, looked up by name.
+    pub fn load_named(&mut self, get: &dyn Fn(&str) -> Option<Tensor>) -> Result<(), String> {
+        let names: Vec<String> = self.named_tensors().into_iter().map(|(k, _)| k).collect();
+        let mut saved = std::collections::HashMap::new();
+        for k in names {
+            let t = get(&k)
+                .ok_or_else(|| format!("the checkpoint holds no '{k}' (the discriminator)"))?;
+            saved.insert(k, t);
+        }
+        for (k, mut v) in self.vs.variables() {
+            let src = &saved[&format!("amp.{k}")];
+            if src.size() != v.size() {
+                return Err(format!(
+                    "discriminator '{k}' has shape {:?}, the config's {:?} (amp.hidden changed?)",
+                    src.size(),
+                    v.size()
+                ));
+            }
+            tch::no_grad(|| v.copy_(src));
+        }
+        self.adam
+            .load_moments(|k| saved.get(&format!("amp.{k}")).ok_or(()))
+            .map_err(|()| "discriminator moments missing".to_string())?;
+        self.adam.step = saved["amp.adam_step"].int64_value(&[0]);
+        let v = Vec::<f64>::try_from(&saved["amp.norm"].to_kind(Kind::Double))
+            .map_err(|e| e.to_string())?;
+        let frozen = self.norm.frozen;
+        self.norm = RunningNorm::from_vec(2 * AMP_DIM, &v)
+            .ok_or("discriminator input statistics of the wrong size")?;
+        self.norm.frozen = frozen;
+        Ok(())
     }
 }

@@ -73,13 +73,11 @@ impl UnifiedConfig {
                 "not a unified config: set `task: unified` and a `unified:` section".into(),
             ));
         }
-        let value = cfg.unified.clone().ok_or_else(|| {
-            ConfigError::Invalid("task: unified needs a `unified:` section".into())
-        })?;
-        let u: UnifiedConfig = serde_yaml::from_value(value).map_err(|e| ConfigError::Parse {
-            path: "unified".into(),
-            message: e.to_string(),
-        })?;
+        let u: UnifiedConfig = crate::rl::config::parse_section(
+            &cfg.unified,
+            "unified",
+            "task: unified needs a `unified:` section",
+        )?;
         u.validate()?;
         Ok(u)
     }
@@ -120,20 +118,9 @@ impl UnifiedConfig {
         if !self.style_weight.is_finite() {
             return bad("style_weight", "must be finite".into());
         }
-        let a = &self.amp;
-        if a.updates == 0 || a.batch == 0 || a.hidden.is_empty() || a.hidden.iter().any(|&h| h < 1)
-        {
-            return bad(
-                "amp",
-                "updates, batch and every hidden size must be at least 1".into(),
-            );
-        }
-        if !(a.learning_rate > 0.0 && a.grad_penalty >= 0.0 && a.logit_reg >= 0.0) {
-            return bad(
-                "amp",
-                "learning_rate must be positive, grad_penalty and logit_reg not negative".into(),
-            );
-        }
+        self.amp
+            .check()
+            .map_err(|why| ConfigError::Invalid(format!("unified.amp: {why}")))?;
         Ok(())
     }
 }

@@ -21,19 +21,17 @@
 //! dataset recorded them. Each plan made at `t` also gives the discriminator a
 //! real transition `(s_t, ŝ_{t+1})`; the policy's `(s_t, s_{t+1})` are the fake
 //! ones; [`VecTask::after_rollout`] updates it once per iteration on both.
-use std::collections::HashMap;
 use std::path::Path;
 
-use rand::{Rng, SeedableRng};
-use tch::{Device, Kind, Tensor};
+use tch::{Device, Tensor};
 
-use super::amp::{AmpStats, Discriminator};
+use super::amp::Discriminator;
 use super::config::UnifiedConfig;
 use super::fk::BodyFk;
 use super::plan::{History, Plan};
 use super::track::TrackingErrors;
 use crate::env::obs::{ANG_VEL, COMMAND, CRITIC_DIM, OBS_DIM, SCAN_DIM};
-use crate::env::task::{EnvSnapshot, TaskDims, VecTask};
+use crate::env::task::{TaskDims, VecTask};
 use crate::env::{Outcome, StepInfo, VecEnv};
 use crate::rl::config::ExperimentConfig;
 use crate::rl::RlError;
@@ -104,7 +102,6 @@ impl UnifiedTask {
     pub fn new(cfg: &ExperimentConfig) -> Result<UnifiedTask, RlError> {
         Self::build(cfg, None)
     }
-
     fn build(cfg: &ExperimentConfig, env: Option<VecEnv>) -> Result<UnifiedTask, RlError> {
         let u = UnifiedConfig::of(cfg)?;
         let wm = WorldModel::load(Path::new(&u.world_model), Device::Cpu)
@@ -320,7 +317,6 @@ impl UnifiedTask {
             self.scan[i * w..(i + 1) * w].copy_from_slice(&plan[..w]);
         }
     }
-
     fn step_inner(&mut self, actions: &[f32]) -> StepInfo {
         let n = self.env.n_envs();
         self.prev_obs.copy_from_slice(&self.env.obs);
@@ -388,33 +384,10 @@ impl UnifiedTask {
             / n as f64;
         info
     }
-
-    /// Adam's moments and step, the weights and the input statistics of the
-    /// discriminator, by name.
-    fn disc_tensors(&self) -> Vec<(String, Tensor)> {
-        let mut out: Vec<(String, Tensor)> = self
-            .disc
-            .vs
-            .variables()
-            .into_iter()
-            .map(|(k, v)| (format!("amp.{k}"), v.detach()))
-            .collect();
-        for (k, v) in self.disc.adam.named_moments() {
-            out.push((format!("amp.{k}"), v));
-        }
-        out.push((
-            "amp.adam_step".into(),
-            Tensor::from_slice(&[self.disc.adam.step]),
-        ));
-        out.push((
-            "amp.norm".into(),
-            Tensor::from_slice(&self.disc.norm.to_vec()),
-        ));
-        out
-    }
 }
 
 impl VecTask for UnifiedTask {
+    crate::env::task::delegate_to_env!(env);
     fn dims(&self) -> TaskDims {
         TaskDims {
             obs: OBS_DIM,
@@ -423,20 +396,8 @@ impl VecTask for UnifiedTask {
             action: crate::robot::NUM_JOINTS,
         }
     }
-    fn n_envs(&self) -> usize {
-        self.env.n_envs()
-    }
-    fn obs(&self) -> &[f32] {
-        &self.env.obs
-    }
-    fn critic(&self) -> &[f32] {
-        &self.env.critic
-    }
     fn scan(&self) -> &[f32] {
         &self.scan
-    }
-    fn final_critic(&self) -> &[f32] {
-        &self.env.final_critic
     }
     fn final_scan(&self) -> &[f32] {
         &self.final_scan
@@ -451,76 +412,21 @@ impl VecTask for UnifiedTask {
         self.env.reset_all();
         self.start_all();
     }
-    fn snapshot(&self) -> Vec<EnvSnapshot> {
-        self.env.snapshot()
-    }
-    fn restore(&mut self, snaps: &[EnvSnapshot]) -> Result<(), String> {
-        self.env.restore(snaps)
-    }
-    fn reward_names(&self) -> Vec<&'static str> {
-        VecTask::reward_names(&self.env)
-    }
-    fn finished_episode_terms(&self) -> Option<Vec<(&'static str, f64)>> {
-        VecTask::finished_episode_terms(&self.env)
-    }
-    fn tracking_errors(&self) -> [f64; 2] {
-        VecTask::tracking_errors(&self.env)
-    }
-    fn mean_level(&self) -> f64 {
-        self.env.mean_terrain_level()
-    }
-    fn penalty_scale(&self) -> f64 {
-        VecTask::penalty_scale(&self.env)
-    }
-    fn set_penalty_scale(&mut self, scale: f64) {
-        self.env.set_penalty_scale(scale)
-    }
-    fn max_episode_steps(&self) -> u64 {
-        self.env.shared().max_episode_steps
-    }
     fn extra_metric_names(&self) -> Vec<&'static str> {
         METRICS.to_vec()
     }
     fn after_rollout(&mut self) -> Result<Vec<f64>, String> {
-        let row = 2 * super::amp::AMP_DIM;
-        let (nr, nf) = (self.real.len() / row, self.fake.len() / row);
-        let mut mean = AmpStats::default();
-        let mut done = 0usize;
-        if nr > 0 && nf > 0 {
-            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(
-                self.cfg.seed ^ (self.disc.adam.step as u64).wrapping_mul(0x9E37_79B9),
-            );
-            let b = self.cfg.amp.batch;
-            for _ in 0..self.cfg.amp.updates {
-                let mut pick = |src: &[f32], n: usize| {
-                    let mut out = Vec::with_capacity(b * row);
-                    for _ in 0..b {
-                        let j = rng.random_range(0..n);
-                        out.extend_from_slice(&src[j * row..(j + 1) * row]);
-                    }
-                    out
-                };
-                let real = pick(&self.real, nr);
-                let fake = pick(&self.fake, nf);
-                let s = self.disc.update(&real, &fake);
-                mean.loss += s.loss;
-                mean.grad_penalty += s.grad_penalty;
-                mean.d_real += s.d_real;
-                mean.d_fake += s.d_fake;
-                mean.accuracy += s.accuracy;
-                done += 1;
-            }
-        }
+        let mean = self.disc.train_on(&self.real, &self.fake, self.cfg.seed);
         self.real.clear();
         self.fake.clear();
         let m = |v: f64, n: usize| if n > 0 { v / n as f64 } else { f64::NAN };
         let s = std::mem::take(&mut self.sums);
         Ok(vec![
-            m(mean.loss, done),
-            m(mean.grad_penalty, done),
-            m(mean.d_real, done),
-            m(mean.d_fake, done),
-            m(mean.accuracy, done),
+            mean.loss,
+            mean.grad_penalty,
+            mean.d_real,
+            mean.d_fake,
+            mean.accuracy,
             m(s.style, s.styled),
             m(s.track[0], s.tracked),
             m(s.track[1], s.tracked),
@@ -532,38 +438,9 @@ impl VecTask for UnifiedTask {
         ])
     }
     fn state_tensors(&self) -> Vec<(String, Tensor)> {
-        self.disc_tensors()
+        self.disc.named_tensors()
     }
     fn load_state_tensors(&mut self, get: &dyn Fn(&str) -> Option<Tensor>) -> Result<(), String> {
-        let names: Vec<String> = self.disc_tensors().into_iter().map(|(k, _)| k).collect();
-        let mut saved = HashMap::new();
-        for k in names {
-            let t = get(&k)
-                .ok_or_else(|| format!("the checkpoint holds no '{k}' (the discriminator)"))?;
-            saved.insert(k, t);
-        }
-        for (k, mut v) in self.disc.vs.variables() {
-            let src = &saved[&format!("amp.{k}")];
-            if src.size() != v.size() {
-                return Err(format!(
-                    "discriminator '{k}' has shape {:?}, the config's {:?} (amp.hidden changed?)",
-                    src.size(),
-                    v.size()
-                ));
-            }
-            tch::no_grad(|| v.copy_(src));
-        }
-        self.disc
-            .adam
-            .load_moments(|k| saved.get(&format!("amp.{k}")).ok_or(()))
-            .map_err(|()| "discriminator moments missing".to_string())?;
-        self.disc.adam.step = saved["amp.adam_step"].int64_value(&[0]);
-        let v = Vec::<f64>::try_from(&saved["amp.norm"].to_kind(Kind::Double))
-            .map_err(|e| e.to_string())?;
-        let frozen = self.disc.norm.frozen;
-        self.disc.norm = crate::rl::normalizer::RunningNorm::from_vec(2 * super::amp::AMP_DIM, &v)
-            .ok_or("discriminator input statistics of the wrong size")?;
-        self.disc.norm.frozen = frozen;
-        Ok(())
+        self.disc.load_named(get)
     }
 }
