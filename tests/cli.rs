@@ -128,3 +128,42 @@ fn an_os_error_is_printed_once() {
         "the cause once: {err}"
     );
 }
+
+#[test]
+fn eval_then_walks_combined_lanes() {
+    let walker = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("models/checkpoints/bridge/checkpoints/latest.pt");
+    let v = json(&[
+        "eval",
+        "--checkpoint",
+        walker.to_str().unwrap(),
+        "--terrain",
+        "bridge",
+        "--then",
+        "gap",
+        "--episodes",
+        "2",
+        "--threads",
+        "1",
+        "--full-collision",
+        "--json",
+    ]);
+    assert_eq!(v["terrain"], "bridge&gap", "{v}");
+    assert_eq!(v["episodes"], 2);
+    assert_eq!(v["level"], 0);
+    // --then and a level sweep do not mix
+    let out = bin()
+        .args([
+            "eval",
+            "--checkpoint",
+            walker.to_str().unwrap(),
+            "--then",
+            "gap",
+            "--levels",
+            "0-1",
+        ])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--then"));
+}

@@ -28,6 +28,11 @@ pub struct EvalArgs {
         value_delimiter = ','
     )]
     terrain: Vec<String>,
+    /// Combined lanes (the paper's Table 2): each --terrain kind in the first
+    /// half of the 10 m walk, this kind in the second (e.g. `--terrain stair
+    /// --then gap`).
+    #[arg(long, conflicts_with = "levels")]
+    then: Option<String>,
     /// Episodes per checkpoint and terrain.
     #[arg(long, default_value_t = 100)]
     episodes: usize,
@@ -80,10 +85,15 @@ pub enum EvalCommand {
 
 impl EvalArgs {
     /// The options of one evaluation on `kind` lanes at `level`.
-    fn options(&self, kind: TerrainKind, level: Option<usize>) -> eval::EvalOptions {
+    fn options(
+        &self,
+        kind: TerrainKind,
+        then: Option<TerrainKind>,
+        level: Option<usize>,
+    ) -> eval::EvalOptions {
         eval::EvalOptions {
             terrain: kind,
-            then: None,
+            then,
             episodes: self.episodes,
             full_collision: self.full_collision,
             seed: self.seed,
@@ -123,6 +133,12 @@ pub fn run(a: EvalArgs) -> Result<()> {
         .iter()
         .map(|p| Checkpoint::read(p))
         .collect::<Result<Vec<_>, _>>()?;
+    let then = a
+        .then
+        .as_deref()
+        .map(|t| TerrainKind::from_name(t.trim()))
+        .transpose()?;
+    let lanes: Vec<String> = kinds.iter().map(|&k| eval::lane_name(k, then)).collect();
     let names: Vec<String> = a.checkpoint.iter().map(|p| checkpoint_name(p)).collect();
     if let Some(levels) = &a.levels {
         return eval_sweep(&a, levels, &kinds, &cks, &names);
@@ -130,10 +146,10 @@ pub fn run(a: EvalArgs) -> Result<()> {
     let mut reports = Vec::with_capacity(cks.len());
     for (ck, name) in cks.iter().zip(&names) {
         let mut row = Vec::with_capacity(kinds.len());
-        for &kind in &kinds {
-            let opts = a.options(kind, a.level);
+        for (&kind, lane) in kinds.iter().zip(&lanes) {
+            let opts = a.options(kind, then, a.level);
             let r = eval::evaluate(ck, &opts)
-                .with_context(|| format!("evaluating {name} on {}", kind.name()))?;
+                .with_context(|| format!("evaluating {name} on {lane}"))?;
             if !a.json {
                 println!(
                     "{name}: {} lanes of {:.0} m ({}{}): success {:.3}, completion {:.3}, velocity error {:.3} m/s, {} falls, {} time-outs, mean speed {:.2} m/s (commanded {:.2}), ankle {:.3} m at the top of a swing, {:.3} m in stance, swing rise {:.3} m",
@@ -154,7 +170,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
     } else {
         serde_json::json!({
             "checkpoints": names,
-            "terrains": kinds.iter().map(|k| k.name()).collect::<Vec<_>>(),
+            "terrains": lanes,
             "success_rate": reports.iter().map(|r| r.iter().map(|e| e.success_rate).collect::<Vec<_>>()).collect::<Vec<_>>(),
             "completion_rate": reports.iter().map(|r| r.iter().map(|e| e.completion_rate).collect::<Vec<_>>()).collect::<Vec<_>>(),
             "reports": reports,
@@ -165,7 +181,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
             .with_context(|| format!("writing {}", path.display()))?;
     }
     if let Some(path) = &a.heatmap {
-        let cols: Vec<String> = kinds.iter().map(|k| k.name().to_string()).collect();
+        let cols = lanes.clone();
         let values: Vec<Vec<f64>> = reports
             .iter()
             .map(|r| r.iter().map(|e| e.success_rate).collect())
@@ -184,14 +200,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
     if a.json {
         println!("{}", serde_json::to_string(&value)?);
     } else if !single {
-        let mut t = format!(
-            "| policy | {} |\n|---|",
-            kinds
-                .iter()
-                .map(|k| k.name())
-                .collect::<Vec<_>>()
-                .join(" | ")
-        );
+        let mut t = format!("| policy | {} |\n|---|", lanes.join(" | "));
         t.push_str(&"---|".repeat(kinds.len()));
         for (name, row) in names.iter().zip(&reports) {
             t.push_str(&format!("\n| {name} |"));
@@ -228,7 +237,7 @@ fn eval_sweep(
     let mut lines: Vec<(String, Vec<f64>, Vec<f64>)> = Vec::with_capacity(cks.len());
     for (i, (ck, name)) in cks.iter().zip(names).enumerate() {
         let kind = kinds[i.min(kinds.len() - 1)];
-        let opts = a.options(kind, None);
+        let opts = a.options(kind, None, None);
         let rs = eval::level_sweep(ck, &opts, &levels)
             .with_context(|| format!("sweeping {name} over {} levels", kind.name()))?;
         if !a.json {
