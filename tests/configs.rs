@@ -75,6 +75,15 @@ fn every_shipped_config_loads() {
             s.validate_runs()
                 .unwrap_or_else(|e| panic!("{}: {e}", f.display()));
             assert!(!s.runs().is_empty(), "{}", f.display());
+            // the scaling sweep's run names say its size and its kinds
+            if f.ends_with("scaling_world_model.yaml") {
+                let names: Vec<String> = s.runs().iter().map(|r| r.name.clone()).collect();
+                assert_eq!(
+                    names[0],
+                    "000-size=0.25-kinds=flat+uneven+stair+gap+bridge-seed=1"
+                );
+                assert_eq!(names[3], "003-size=1.0-kinds=flat-seed=1");
+            }
             continue;
         }
         let c = dreampolicy::rl::config::load(f, &[])

@@ -368,6 +368,70 @@ fn split_is_by_episode_and_deterministic() {
 }
 
 #[test]
+fn train_fractions_nest_and_kinds_filter_whole_episodes() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames = synth(0, 16, 120, Dims::G1, &lens);
+    write_shard(dir.path(), 0, &frames, Dims::G1, WriterOptions::default());
+    let ds = Dataset::open(dir.path(), ReadOptions::default()).unwrap();
+    let base = SplitSpec::new(0.2, 3).unwrap();
+    let episodes = |spec: SplitSpec, s: Split| -> BTreeSet<u64> {
+        ds.split_frames(Some((spec, s)))
+            .map(|x| x.unwrap().1.episode)
+            .collect()
+    };
+    let val = episodes(base, Split::Validation);
+    let mut last: Option<BTreeSet<u64>> = None;
+    let full = episodes(base, Split::Train);
+    for f in [0.25, 0.5, 1.0] {
+        let spec = base.with_train_fraction(f).unwrap();
+        // the validation episodes do not move
+        assert_eq!(episodes(spec, Split::Validation), val, "fraction {f}");
+        let train = episodes(spec, Split::Train);
+        let unused = episodes(spec, Split::Unused);
+        assert!(train.is_disjoint(&unused) && train.is_disjoint(&val));
+        assert_eq!(
+            &train | &unused,
+            full,
+            "fraction {f}: train + unused = the train side"
+        );
+        let share = train.len() as f64 / full.len() as f64;
+        assert!((share - f).abs() < 0.12, "fraction {f}: {share}");
+        // nested: a smaller fraction's episodes are in every larger one's
+        if let Some(prev) = &last {
+            assert!(prev.is_subset(&train), "fraction {f}");
+        }
+        last = Some(train);
+    }
+    assert_eq!(base.with_train_fraction(1.0).unwrap(), base);
+    assert!(base.with_train_fraction(0.0).is_err());
+    assert!(base.with_train_fraction(1.5).is_err());
+    // kinds keep whole episodes of those kinds, and nothing else
+    let kinds: BTreeSet<TerrainKind> = frames.iter().map(|f| f.terrain).collect();
+    assert!(
+        kinds.len() >= 2,
+        "the synthetic shard holds several kinds: {kinds:?}"
+    );
+    let one = *kinds.iter().next().unwrap();
+    let got: Vec<Frame> = ds
+        .split_frames_of(None, &[one])
+        .map(|x| x.unwrap().1)
+        .collect();
+    let want: Vec<Frame> = frames
+        .iter()
+        .filter(|f| f.terrain == one)
+        .cloned()
+        .collect();
+    assert!(!want.is_empty() && got == want);
+    assert_eq!(ds.split_frames_of(None, &[]).count(), frames.len());
+    let spec_w = WindowSpec::new(2, 2).unwrap();
+    let per_kind: usize = kinds
+        .iter()
+        .map(|&k| ds.windows_of(spec_w, None, &[k]).count())
+        .sum();
+    assert_eq!(per_kind, ds.windows(spec_w, None).count());
+}
+
+#[test]
 fn shuffle_is_seeded_bounded_and_a_permutation() {
     let items: Vec<Result<u32, ()>> = (0..500).map(Ok).collect();
     let run = |cap, seed| -> Vec<u32> {

@@ -58,7 +58,7 @@ fn a_grid_is_every_combination_once_per_seed_with_its_overrides() {
     assert_eq!(names.len(), runs.len(), "run names are unique");
     let r = &runs[3];
     assert_eq!(r.index, 3);
-    assert_eq!(r.name, "003-lr=0.0001-actor_hidden=_32_32_-seed=2");
+    assert_eq!(r.name, "003-lr=0.0001-actor_hidden=32+32-seed=2");
     assert_eq!(
         r.sets,
         [

@@ -12,13 +12,20 @@ use super::DataError;
 pub enum Split {
     Train,
     Validation,
+    /// A train episode left out by [`SplitSpec::train_fraction`].
+    Unused,
 }
 
-/// Episodes whose hash falls below `val_fraction` are validation episodes.
+/// Episodes whose hash falls below `val_fraction` are validation episodes;
+/// of the others, those in the first `train_fraction` of the rest of the
+/// range are train episodes (a smaller fraction's train episodes are a subset
+/// of a larger one's, and the validation episodes are the same for every
+/// fraction: the scaling analysis's nested dataset sizes).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SplitSpec {
     pub val_fraction: f64,
     pub seed: u64,
+    pub train_fraction: f64,
 }
 
 impl SplitSpec {
@@ -28,7 +35,24 @@ impl SplitSpec {
                 "validation fraction {val_fraction} is outside 0..=1"
             )));
         }
-        Ok(SplitSpec { val_fraction, seed })
+        Ok(SplitSpec {
+            val_fraction,
+            seed,
+            train_fraction: 1.0,
+        })
+    }
+
+    /// Keep only `fraction` (in (0, 1]) of the train episodes.
+    pub fn with_train_fraction(self, fraction: f64) -> Result<SplitSpec, DataError> {
+        if !(fraction > 0.0 && fraction <= 1.0) {
+            return Err(DataError::Invalid(format!(
+                "train fraction {fraction} is outside (0, 1]"
+            )));
+        }
+        Ok(SplitSpec {
+            train_fraction: fraction,
+            ..self
+        })
     }
 
     /// The side of `episode`.
@@ -38,8 +62,12 @@ impl SplitSpec {
         let u = (h >> 11) as f64 / (1u64 << 53) as f64;
         if u < self.val_fraction {
             Split::Validation
-        } else {
+        } else if self.train_fraction >= 1.0
+            || (u - self.val_fraction) < self.train_fraction * (1.0 - self.val_fraction)
+        {
             Split::Train
+        } else {
+            Split::Unused
         }
     }
 }

@@ -226,6 +226,31 @@ impl Dataset {
         }
     }
 
+    /// [`Dataset::split_frames`], only the frames of `kinds`' episodes (all
+    /// when `kinds` is empty).
+    pub fn split_frames_of(
+        &self,
+        split: Option<(SplitSpec, Split)>,
+        kinds: &[crate::terrain::TerrainKind],
+    ) -> FrameStream {
+        let all = self.split_frames(split);
+        if kinds.is_empty() {
+            return all;
+        }
+        let kinds = kinds.to_vec();
+        Box::new(all.filter(move |r| r.as_ref().map_or(true, |(_, f)| kinds.contains(&f.terrain))))
+    }
+
+    /// [`Dataset::windows`] over the episodes of `kinds` only (all when empty).
+    pub fn windows_of(
+        &self,
+        spec: WindowSpec,
+        split: Option<(SplitSpec, Split)>,
+        kinds: &[crate::terrain::TerrainKind],
+    ) -> Windows<FrameStream> {
+        Windows::new(self.split_frames_of(split, kinds), spec, self.dims())
+    }
+
     /// The windows of one side of a split, in stream order (wrap them in a
     /// [`super::Shuffle`] for training).
     pub fn windows(

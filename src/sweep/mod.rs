@@ -258,18 +258,28 @@ pub fn value_text(v: &serde_yaml::Value) -> String {
     }
 }
 
-/// `value_text` made safe for a directory name.
+/// `value_text` made safe for a directory name; a list's items joined by `+`
+/// (`[flat, uneven]` names a run `kinds=flat+uneven`).
 fn name_part(v: &serde_yaml::Value) -> String {
-    value_text(v)
-        .chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || matches!(c, '.' | '-' | '_') {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect()
+    let safe = |t: String| -> String {
+        t.chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || matches!(c, '.' | '-' | '_') {
+                    c
+                } else {
+                    '_'
+                }
+            })
+            .collect()
+    };
+    match v {
+        serde_yaml::Value::Sequence(items) => items
+            .iter()
+            .map(|i| safe(value_text(i)))
+            .collect::<Vec<_>>()
+            .join("+"),
+        other => safe(value_text(other)),
+    }
 }
 
 impl Sweep {

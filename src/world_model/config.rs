@@ -41,6 +41,38 @@ pub struct DataSection {
     /// Bounded shuffle buffer (windows).
     #[serde(default = "d_shuffle")]
     pub shuffle: usize,
+    /// Train on this fraction of the train episodes (hash-chosen and nested:
+    /// a smaller fraction's episodes are in every larger one's; the
+    /// validation episodes do not change): the scaling analysis's dataset size.
+    #[serde(default = "d_one")]
+    pub train_fraction: f64,
+    /// Train on these terrain kinds' episodes only (default: all); validation
+    /// keeps every kind: the scaling analysis's diversity.
+    #[serde(default)]
+    pub kinds: Vec<String>,
+}
+
+fn d_one() -> f64 {
+    1.0
+}
+
+impl DataSection {
+    /// The train/validation split of this section.
+    pub fn split(&self) -> Result<crate::data::SplitSpec, crate::data::DataError> {
+        crate::data::SplitSpec::new(self.val_fraction, self.split_seed)?
+            .with_train_fraction(self.train_fraction)
+    }
+
+    /// The kinds of `kinds` (empty: every kind).
+    pub fn kinds(&self) -> Result<Vec<crate::terrain::TerrainKind>, ConfigError> {
+        self.kinds
+            .iter()
+            .map(|k| {
+                crate::terrain::TerrainKind::from_name(k)
+                    .map_err(|e| ConfigError::Invalid(format!("data.kinds: {e}")))
+            })
+            .collect()
+    }
 }
 
 fn d_val_fraction() -> f64 {
@@ -238,6 +270,13 @@ impl WorldModelConfig {
         if self.data.path.is_empty() {
             return bad("data.path must name a dataset directory".into());
         }
+        if !(self.data.train_fraction > 0.0 && self.data.train_fraction <= 1.0) {
+            return bad(format!(
+                "data.train_fraction must be in (0, 1], got {}",
+                self.data.train_fraction
+            ));
+        }
+        self.data.kinds()?;
         if !(0.0..1.0).contains(&self.data.val_fraction) {
             return bad(format!(
                 "data.val_fraction must be in [0, 1), got {}",

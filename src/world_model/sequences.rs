@@ -88,6 +88,8 @@ pub struct Sequences {
     dataset: Dataset,
     spec: WindowSpec,
     split: SplitSpec,
+    /// The kinds trained on (empty: all).
+    kinds: Vec<crate::terrain::TerrainKind>,
     shuffle: usize,
     seed: u64,
     /// Epochs completed.
@@ -111,7 +113,11 @@ impl Sequences {
     pub fn new(dataset: Dataset, cfg: &WorldModelConfig) -> Result<Sequences, WmError> {
         Ok(Sequences {
             spec: Sequences::spec(cfg)?,
-            split: SplitSpec::new(cfg.data.val_fraction, cfg.data.split_seed)?,
+            split: cfg.data.split()?,
+            kinds: cfg
+                .data
+                .kinds()
+                .map_err(|e| WmError::Invalid(e.to_string()))?,
             shuffle: cfg.data.shuffle,
             seed: cfg.train.seed,
             epoch: 0,
@@ -130,9 +136,9 @@ impl Sequences {
     }
 
     fn open(&self) -> Stream {
-        let windows = self
-            .dataset
-            .windows(self.spec, Some((self.split, Split::Train)));
+        let windows =
+            self.dataset
+                .windows_of(self.spec, Some((self.split, Split::Train)), &self.kinds);
         Shuffle::new(
             windows,
             self.shuffle,

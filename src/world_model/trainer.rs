@@ -31,7 +31,7 @@ use super::schedule::{rollout_probability, NoiseSchedule};
 use super::sequences::{validation_windows, SeqBatch, Sequences};
 use super::WmError;
 use crate::data::sample::splitmix64;
-use crate::data::{Dataset, DatasetStats, Dims, ReadOptions, Split, SplitSpec};
+use crate::data::{Dataset, DatasetStats, Dims, ReadOptions, Split};
 use crate::rl::optim::Adam;
 use crate::run::{latest_checkpoint, Progress, RunDir};
 use crate::world_model::config::WorldModelConfig;
@@ -125,9 +125,12 @@ pub fn dataset_stats(dataset: &Dataset, cfg: &WorldModelConfig) -> Result<Datase
     if dir.is_dir() && dir.join(crate::data::stats::STATS_FILE).is_file() {
         return Ok(DatasetStats::load(dir, dataset.dims())?);
     }
-    let split = SplitSpec::new(cfg.data.val_fraction, cfg.data.split_seed)?;
+    let kinds = cfg
+        .data
+        .kinds()
+        .map_err(|e| WmError::Invalid(e.to_string()))?;
     Ok(DatasetStats::compute(
-        dataset.split_frames(Some((split, Split::Train))),
+        dataset.split_frames_of(Some((cfg.data.split()?, Split::Train)), &kinds),
         dataset.dims(),
     )?)
 }
