@@ -350,3 +350,52 @@ fn the_slurm_array_script_runs_one_task_per_array_index() {
     let csv = std::fs::read_to_string(dir.join("summary.csv")).unwrap();
     assert!(csv.lines().nth(1).unwrap().contains(",0,,,,"), "{csv}");
 }
+
+#[test]
+fn a_baseline_sweep_trains_and_evaluates_its_policies() {
+    // the w/o-diffusion baseline on a synthetic dataset: two style weights,
+    // one iteration each, then two flat lanes
+    let s = Scratch::new("sweep-baseline");
+    let ds = s.0.join("dataset");
+    std::fs::create_dir_all(&ds).unwrap();
+    common::write_synthetic_shard(
+        &ds,
+        2,
+        10,
+        |_| 5,
+        |f, ord, _, step| {
+            f.state
+                .iter_mut()
+                .for_each(|v| *v = ord as f32 + 0.1 * step as f32);
+        },
+    );
+    let base = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("configs/test/no_diffusion_tiny.yaml");
+    let file = s.write(
+        "b.yaml",
+        &format!(
+            "base: {}\ntrainer: no_diffusion\nset: [train.iterations=1, no_diffusion.dataset={}]\n\
+             axes:\n  - {{key: no_diffusion.style_weight, name: style, values: [0.0, 0.5]}}\n\
+             eval: {{terrain: flat, episodes: 2, full_collision: false}}\n",
+            base.display(),
+            ds.display()
+        ),
+    );
+    let dir = s.0.join("out");
+    let out = bin()
+        .args(["sweep", "run", "--jobs", "1", "--threads", "1", "--out"])
+        .arg(&dir)
+        .arg(&file)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    for name in ["000-style=0.0", "001-style=0.5"] {
+        let res = dreampolicy::sweep::read_result(&dir.join(name).join("result.json"))
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(res.iterations, 1);
+        assert_eq!(res.eval.as_ref().unwrap()["episodes"], 2);
+        let cols = std::fs::read_to_string(dir.join(name).join("metrics.csv")).unwrap();
+        assert!(cols.lines().next().unwrap().contains("amp_accuracy"));
+    }
+}

@@ -63,15 +63,27 @@ pub enum Trainer {
     Specialist,
     /// `train world-model`: the diffusion world model, `world_model::config`.
     WorldModel,
+    /// `train unified`: the unified policy (`task: unified`), e.g. one run per
+    /// world model of the scaling analysis (an axis over `unified.world_model`).
+    Unified,
+    /// `train dagger`: the distillation baseline (a `dagger:` section).
+    Dagger,
+    /// `train no-diffusion`: the w/o-diffusion baseline (`task: no_diffusion`).
+    NoDiffusion,
 }
 
 impl Trainer {
     /// The config keys `--threads` sets (as `train` does).
     fn thread_keys(self) -> &'static [&'static str] {
         match self {
-            Trainer::Specialist => &["env.threads", "train.torch_threads"],
             Trainer::WorldModel => &["train.torch_threads"],
+            _ => &["env.threads", "train.torch_threads"],
         }
+    }
+
+    /// Whether its runs are policies (an experiment config; `eval` applies).
+    fn trains_a_policy(self) -> bool {
+        self != Trainer::WorldModel
     }
 }
 
@@ -372,8 +384,11 @@ impl Sweep {
         if self.final_window == 0 {
             return bad("final_window must be >= 1".into());
         }
-        if self.eval.is_some() && self.trainer != Trainer::Specialist {
-            return bad("`eval` evaluates policies: it needs trainer: specialist".into());
+        if self.eval.is_some() && !self.trainer.trains_a_policy() {
+            return bad(
+                "`eval` evaluates policies: it needs a policy's trainer (specialist, unified, dagger, no_diffusion)"
+                    .into(),
+            );
         }
         Ok(())
     }
@@ -473,10 +488,10 @@ impl Sweep {
     pub fn validate_runs(&self) -> Result<(), SweepError> {
         for r in self.runs() {
             match self.trainer {
-                Trainer::Specialist => self.run_config(&r, &[], crate::rl::config::load).map(drop),
                 Trainer::WorldModel => self
                     .run_config(&r, &[], crate::world_model::config::load_world_model)
                     .map(drop),
+                _ => self.run_config(&r, &[], crate::rl::config::load).map(drop),
             }?;
         }
         Ok(())
@@ -530,13 +545,19 @@ impl Sweep {
             return self.metrics.clone();
         }
         let mut m: Vec<&str> = match self.trainer {
-            Trainer::Specialist => vec![
+            Trainer::WorldModel => vec!["loss", "val_loss"],
+            Trainer::Dagger => vec![
+                "imitation_loss",
+                "action_error",
+                "mean_episode_length",
+                "fall_fraction",
+            ],
+            _ => vec![
                 "mean_return",
                 "mean_episode_length",
                 "vel_error_xy",
                 "fall_fraction",
             ],
-            Trainer::WorldModel => vec!["loss", "val_loss"],
         };
         if self.eval.is_some() {
             m.splice(0..0, ["eval.success_rate", "eval.completion_rate"]);
@@ -703,10 +724,17 @@ pub fn run_task(
         message,
     };
     let (iterations, samples, wall) = match sweep.trainer {
-        Trainer::Specialist => {
+        Trainer::Specialist | Trainer::Unified | Trainer::Dagger | Trainer::NoDiffusion => {
             let cfg = sweep.task_config(r, &run_dir, resume, threads, crate::rl::config::load)?;
-            let s = crate::rl::runner::train(&cfg, &run_dir, resume, quiet)
-                .map_err(|e| train_err(e.to_string()))?;
+            let s = match sweep.trainer {
+                Trainer::Unified => crate::unified::train(&cfg, &run_dir, resume, quiet),
+                Trainer::Dagger => crate::baselines::dagger::train(&cfg, &run_dir, resume, quiet),
+                Trainer::NoDiffusion => {
+                    crate::baselines::no_diffusion::train(&cfg, &run_dir, resume, quiet)
+                }
+                _ => crate::rl::runner::train(&cfg, &run_dir, resume, quiet),
+            }
+            .map_err(|e| train_err(e.to_string()))?;
             (s.iterations, s.env_steps, s.wall_time_s)
         }
         Trainer::WorldModel => {
