@@ -398,4 +398,28 @@ fn a_baseline_sweep_trains_and_evaluates_its_policies() {
         let cols = std::fs::read_to_string(dir.join(name).join("metrics.csv")).unwrap();
         assert!(cols.lines().next().unwrap().contains("amp_accuracy"));
     }
+    // labels name long values in run names; their count must match
+    let labelled = s.write(
+        "l.yaml",
+        &format!(
+            "base: {}\ntrainer: no_diffusion\nmode: list\naxes:\n  - {{key: no_diffusion.dataset, name: data, labels: [small, big], values: [/a/very/long/path, /another/long/path]}}\n",
+            base.display()
+        ),
+    );
+    let names: Vec<String> = Sweep::load(&labelled)
+        .unwrap()
+        .runs()
+        .into_iter()
+        .map(|r| r.name)
+        .collect();
+    assert_eq!(names, ["000-data=small", "001-data=big"]);
+    let bad = s.write(
+        "m.yaml",
+        &format!(
+            "base: {}\naxes:\n  - {{key: ppo.learning_rate, labels: [a], values: [1.0e-4, 1.0e-3]}}\n",
+            base.display()
+        ),
+    );
+    let e = Sweep::load(&bad).unwrap_err().to_string();
+    assert!(e.contains("1 labels for 2 values"), "{e}");
 }

@@ -122,9 +122,23 @@ pub struct Axis {
     /// Short label in run names, tables and plots (default: the key's last part).
     #[serde(default)]
     pub name: Option<String>,
+    /// What each value is called in run names, in `values`' order (default:
+    /// the values themselves; for long ones such as checkpoint paths).
+    #[serde(default)]
+    pub labels: Vec<String>,
 }
 
 impl Axis {
+    /// Value `v`'s part of a run name: its label, else the value made safe.
+    fn value_name(&self, v: &serde_yaml::Value) -> String {
+        match self.values.iter().position(|x| x == v) {
+            Some(i) if i < self.labels.len() => {
+                name_part(&serde_yaml::Value::from(self.labels[i].as_str()))
+            }
+            _ => name_part(v),
+        }
+    }
+
     /// The label of this axis in run names, tables and plots.
     pub fn label(&self) -> String {
         self.name
@@ -375,6 +389,18 @@ impl Sweep {
                 ));
             }
         }
+        if let Some(a) = self
+            .axes
+            .iter()
+            .find(|a| !a.labels.is_empty() && a.labels.len() != a.values.len())
+        {
+            return bad(format!(
+                "axis {}: {} labels for {} values",
+                a.key,
+                a.labels.len(),
+                a.values.len()
+            ));
+        }
         if self.mode == Mode::Random && self.samples == 0 {
             return bad("random mode needs `samples` >= 1".into());
         }
@@ -460,8 +486,8 @@ impl Sweep {
                     .map(|(a, v)| (a.label(), a.key.clone(), v.clone()))
                     .collect();
                 let mut name = format!("{index:03}");
-                for (label, _, v) in &values {
-                    name.push_str(&format!("-{label}={}", name_part(v)));
+                for ((label, _, v), a) in values.iter().zip(&self.axes) {
+                    name.push_str(&format!("-{label}={}", a.value_name(v)));
                 }
                 let mut sets = self.set.clone();
                 sets.extend(values.iter().map(|(_, k, v)| {
