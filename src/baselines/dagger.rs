@@ -386,23 +386,10 @@ impl Dagger {
         let mut adam = Adam::new(student.policy.named_parameters(), dagger.learning_rate);
         let (mut iteration, mut env_steps, mut wall_offset) = (0, 0, 0.0);
         if let Some(ck) = resume {
-            let m = &ck.meta;
-            if m.n_envs != n || m.dims != dims {
-                return Err(RlError::Invalid(format!(
-                    "{}: saved for {} envs of {:?}, this run has {n} of {dims:?}",
-                    ck.path.display(),
-                    m.n_envs,
-                    m.dims
-                )));
-            }
-            ck.load_agent(&mut student)?;
-            ck.load_optimizer(&mut adam)?;
+            (iteration, env_steps, wall_offset) =
+                ck.resume_into(&mut env, &mut student, &mut adam)?;
+            // the config's rate (a resume may change it)
             adam.lr = dagger.learning_rate;
-            env.restore(&m.snapshots)
-                .map_err(|e| RlError::Invalid(format!("{}: {e}", ck.path.display())))?;
-            env.set_penalty_scale(m.penalty_scale);
-            env.reset_all();
-            (iteration, env_steps, wall_offset) = (m.iteration, m.env_steps, m.wall_time_s);
         }
         let stats = EpisodeStats::new(n, resume.map(|ck| &ck.meta.episode_window));
         student.reset_history(&env);

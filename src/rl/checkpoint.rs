@@ -332,6 +332,38 @@ impl Checkpoint {
         Ok(report)
     }
 
+    /// Continue a run from this checkpoint: `task` must have the saved env
+    /// count and sizes; the agent's networks and normalizers, Adam's moments,
+    /// step and rate, the envs' RNGs and levels, the task's own state and the
+    /// penalty scale are restored, then every env starts a new episode (the
+    /// checkpoint was taken at one). Returns the run's iteration, env-steps
+    /// and wall time so far.
+    pub fn resume_into(
+        &self,
+        task: &mut dyn crate::env::task::VecTask,
+        agent: &mut Agent,
+        opt: &mut Adam,
+    ) -> Result<(usize, u64, f64), RlError> {
+        let (m, n, d) = (&self.meta, task.n_envs(), task.dims());
+        if m.n_envs != n || m.dims != d {
+            return Err(RlError::Invalid(format!(
+                "{}: saved for {} envs of {:?}, this run has {n} of {d:?}",
+                self.path.display(),
+                m.n_envs,
+                m.dims
+            )));
+        }
+        self.load_agent(agent)?;
+        self.load_optimizer(opt)?;
+        let here = |e: String| RlError::Invalid(format!("{}: {e}", self.path.display()));
+        task.restore(&m.snapshots).map_err(here)?;
+        task.load_state_tensors(&|name| self.task_tensor(name))
+            .map_err(here)?;
+        task.set_penalty_scale(m.penalty_scale);
+        task.reset_all();
+        Ok((m.iteration, m.env_steps, m.wall_time_s))
+    }
+
     /// Restore Adam's moments and step.
     pub fn load_optimizer(&self, opt: &mut Adam) -> Result<(), RlError> {
         opt.load_moments(|name| self.file.tensor(name))?;

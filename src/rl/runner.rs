@@ -157,28 +157,12 @@ impl<'a, T: VecTask> Trainer<'a, T> {
         let d = task.dims();
         let (mut iteration, mut env_steps, mut wall_offset) = (0, 0, 0.0);
         if let Some(ck) = resume {
-            let m = &ck.meta;
-            if m.n_envs != n || m.dims != d {
-                return Err(RlError::Invalid(format!(
-                    "{}: saved for {} envs of {:?}, this run has {n} of {d:?}",
-                    ck.path.display(),
-                    m.n_envs,
-                    m.dims
-                )));
-            }
-            ck.load_agent(&mut agent)?;
-            ck.load_optimizer(&mut ppo.opt)?;
+            (iteration, env_steps, wall_offset) =
+                ck.resume_into(&mut *task, &mut agent, &mut ppo.opt)?;
             if cfg.ppo.schedule == crate::rl::config::LrSchedule::Fixed {
                 // a fixed rate is the config's (a resume may change it)
                 ppo.opt.lr = cfg.ppo.learning_rate;
             }
-            task.restore(&m.snapshots)
-                .map_err(|e| RlError::Invalid(format!("{}: {e}", ck.path.display())))?;
-            task.load_state_tensors(&|name| ck.task_tensor(name))
-                .map_err(|e| RlError::Invalid(format!("{}: {e}", ck.path.display())))?;
-            task.set_penalty_scale(m.penalty_scale);
-            task.reset_all();
-            (iteration, env_steps, wall_offset) = (m.iteration, m.env_steps, m.wall_time_s);
         }
         let stats = EpisodeStats::new(n, resume.map(|ck| &ck.meta.episode_window));
         agent.check_task(&*task).map_err(RlError::Invalid)?;
