@@ -159,3 +159,72 @@ fn a_bad_matrix_file_is_one_line_naming_the_cell() {
     assert!(err.contains("reference cell"), "{err}");
     assert!(err.lines().count() <= 2, "{err}");
 }
+
+/// `--terrain`, `--level` and `--episodes` replace the matrix file's values, in
+/// this build and in the other builds' binaries (here this same binary as the
+/// other build: its cells must equal ours, which they only do when the
+/// overrides reach it too).
+#[test]
+fn command_line_overrides_reach_every_build() {
+    let dir = Scratch::new("sim2sim-override");
+    let cfg_path = dir.0.join("matrix.yaml");
+    std::fs::write(
+        &cfg_path,
+        format!(
+            "terrain: flat\nepisodes: 5\ncells:\n  - name: reference\nbuilds:\n  - name: again\n    \
+             binary: {}\n",
+            env!("CARGO_BIN_EXE_dreampolicy")
+        ),
+    )
+    .unwrap();
+    let out = dir.0.join("out");
+    let o = Command::new(env!("CARGO_BIN_EXE_dreampolicy"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(["sim2sim", "--threads", "1", "--checkpoint"])
+        .arg(walker_path())
+        .arg("--config")
+        .arg(&cfg_path)
+        .args([
+            "--terrain",
+            "stair",
+            "--level",
+            "0",
+            "--episodes",
+            "2",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    let r: sim2sim::Sim2SimReport =
+        serde_json::from_str(&std::fs::read_to_string(out.join("sim2sim.json")).unwrap()).unwrap();
+    assert_eq!(
+        (r.terrain.as_str(), r.level, r.episodes),
+        ("stair", Some(0), 2)
+    );
+    assert_eq!(r.builds.len(), 2, "{:?}", r.builds);
+    let ours = r.get("reference", &r.builds[0]).unwrap();
+    let theirs = &r.cells[1];
+    assert_eq!(ours.episodes, 2);
+    assert!(theirs.note.is_none(), "{theirs:?}");
+    // the flat walker does not climb the paper's 15 cm stairs
+    assert!(ours.success_rate.unwrap() < 1.0, "{ours:?}");
+    assert_eq!(
+        (ours.success_rate, ours.completion_rate, ours.falls),
+        (theirs.success_rate, theirs.completion_rate, theirs.falls)
+    );
+    // an unknown terrain on the command line is one line naming it
+    let o = Command::new(env!("CARGO_BIN_EXE_dreampolicy"))
+        .args(["sim2sim", "--no-external", "--checkpoint"])
+        .arg(walker_path())
+        .arg("--config")
+        .arg(&cfg_path)
+        .args(["--terrain", "moon"])
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("moon") && err.lines().count() <= 2, "{err}");
+}

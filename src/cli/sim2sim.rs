@@ -36,10 +36,38 @@ pub struct Sim2SimArgs {
     /// Print the report as one JSON object.
     #[arg(long)]
     json: bool,
+    /// Lanes of this terrain instead of the config's `terrain` (a specialist on
+    /// its own terrain: `--terrain bridge`).
+    #[arg(long)]
+    terrain: Option<String>,
+    /// Lane level instead of the config's `level` (default: the checkpoint's
+    /// `eval.level`).
+    #[arg(long)]
+    level: Option<usize>,
+    /// Episodes per cell instead of the config's `episodes`.
+    #[arg(long)]
+    episodes: Option<usize>,
+}
+
+/// The matrix file with the command line's overrides, checked again.
+fn matrix(a: &Sim2SimArgs) -> Result<Sim2SimConfig> {
+    let mut c = sim2sim::load(&a.config)?;
+    if let Some(t) = &a.terrain {
+        c.terrain = t.clone();
+    }
+    if a.level.is_some() {
+        c.level = a.level;
+    }
+    if let Some(n) = a.episodes {
+        c.episodes = n;
+    }
+    c.validate()
+        .with_context(|| format!("{} with the command line's overrides", a.config.display()))?;
+    Ok(c)
 }
 
 pub fn run(a: Sim2SimArgs) -> Result<()> {
-    let c = sim2sim::load(&a.config)?;
+    let c = matrix(&a)?;
     let ck = Checkpoint::read(&a.checkpoint)?;
     let cfg = ck.config()?;
     let quiet = a.this_build_only || a.json;
@@ -176,6 +204,21 @@ fn other_build(
         .arg("--threads")
         .arg(a.threads.to_string())
         .arg("--this-build-only")
+        .args(
+            a.terrain
+                .iter()
+                .flat_map(|t| ["--terrain".to_string(), t.clone()]),
+        )
+        .args(
+            a.level
+                .iter()
+                .flat_map(|l| ["--level".to_string(), l.to_string()]),
+        )
+        .args(
+            a.episodes
+                .iter()
+                .flat_map(|n| ["--episodes".to_string(), n.to_string()]),
+        )
         .stderr(std::process::Stdio::inherit())
         .output();
     let parsed = out.map_err(|e| e.to_string()).and_then(|o| {
