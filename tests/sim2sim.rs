@@ -4,11 +4,24 @@
 //! build. Also run against MuJoCo 2.2.2 in CI (the build axis).
 mod common;
 
+use std::path::Path;
 use std::process::Command;
 
 use common::{walker_path, Scratch};
 use dreampolicy::eval::sim2sim::{self, Cell, Sim2SimConfig};
 use dreampolicy::rl::checkpoint::Checkpoint;
+
+/// `dreampolicy sim2sim` on the committed walker with the matrix file `matrix`;
+/// the caller adds the other flags.
+fn sim2sim_walker(matrix: &Path) -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_dreampolicy"));
+    c.current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(["sim2sim", "--checkpoint"])
+        .arg(walker_path())
+        .arg("--config")
+        .arg(matrix);
+    c
+}
 
 fn config(cells: &[(&str, &[&str])]) -> Sim2SimConfig {
     Sim2SimConfig {
@@ -86,13 +99,8 @@ fn the_cli_writes_json_markdown_and_heatmap_with_the_build_and_deployer_columns(
     )
     .unwrap();
     let out = dir.0.join("out");
-    let o = Command::new(env!("CARGO_BIN_EXE_dreampolicy"))
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .args(["sim2sim", "--threads", "1", "--checkpoint"])
-        .arg(walker_path())
-        .arg("--config")
-        .arg(&cfg_path)
-        .arg("--out")
+    let o = sim2sim_walker(&cfg_path)
+        .args(["--threads", "1", "--out"])
         .arg(&out)
         .output()
         .unwrap();
@@ -133,12 +141,8 @@ fn a_bad_matrix_file_is_one_line_naming_the_cell() {
         "cells:\n  - name: typo\n    set: [sim.timestpe=0.002]\n",
     )
     .unwrap();
-    let o = Command::new(env!("CARGO_BIN_EXE_dreampolicy"))
-        .args(["sim2sim", "--no-external", "--checkpoint"])
-        .arg(walker_path())
-        .arg("--config")
-        .arg(&p)
-        .arg("--out")
+    let o = sim2sim_walker(&p)
+        .args(["--no-external", "--out"])
         .arg(dir.0.join("out"))
         .output()
         .unwrap();
@@ -147,13 +151,7 @@ fn a_bad_matrix_file_is_one_line_naming_the_cell() {
     // an unknown key is a note in its cell (the matrix goes on)
     assert!(out.contains("typo") && out.contains("timestpe"), "{out}");
     std::fs::write(&p, "cells: []\n").unwrap();
-    let o = Command::new(env!("CARGO_BIN_EXE_dreampolicy"))
-        .args(["sim2sim", "--checkpoint"])
-        .arg(walker_path())
-        .arg("--config")
-        .arg(&p)
-        .output()
-        .unwrap();
+    let o = sim2sim_walker(&p).output().unwrap();
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("reference cell"), "{err}");
@@ -178,13 +176,10 @@ fn command_line_overrides_reach_every_build() {
     )
     .unwrap();
     let out = dir.0.join("out");
-    let o = Command::new(env!("CARGO_BIN_EXE_dreampolicy"))
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .args(["sim2sim", "--threads", "1", "--checkpoint"])
-        .arg(walker_path())
-        .arg("--config")
-        .arg(&cfg_path)
+    let o = sim2sim_walker(&cfg_path)
         .args([
+            "--threads",
+            "1",
             "--terrain",
             "stair",
             "--level",
@@ -206,7 +201,7 @@ fn command_line_overrides_reach_every_build() {
     );
     assert_eq!(r.builds.len(), 2, "{:?}", r.builds);
     let ours = r.get("reference", &r.builds[0]).unwrap();
-    let theirs = &r.cells[1];
+    let theirs = r.get("reference", &r.builds[1]).unwrap();
     assert_eq!(ours.episodes, 2);
     assert!(theirs.note.is_none(), "{theirs:?}");
     // the flat walker does not climb the paper's 15 cm stairs
@@ -216,12 +211,8 @@ fn command_line_overrides_reach_every_build() {
         (theirs.success_rate, theirs.completion_rate, theirs.falls)
     );
     // an unknown terrain on the command line is one line naming it
-    let o = Command::new(env!("CARGO_BIN_EXE_dreampolicy"))
-        .args(["sim2sim", "--no-external", "--checkpoint"])
-        .arg(walker_path())
-        .arg("--config")
-        .arg(&cfg_path)
-        .args(["--terrain", "moon"])
+    let o = sim2sim_walker(&cfg_path)
+        .args(["--no-external", "--terrain", "moon"])
         .output()
         .unwrap();
     assert!(!o.status.success());

@@ -49,6 +49,22 @@ pub struct Sim2SimArgs {
     episodes: Option<usize>,
 }
 
+/// The command line's overrides of the matrix file, as flags for another
+/// build's binary.
+fn override_flags(a: &Sim2SimArgs) -> Vec<String> {
+    let mut f = Vec::new();
+    if let Some(t) = &a.terrain {
+        f.extend(["--terrain".to_string(), t.clone()]);
+    }
+    if let Some(l) = a.level {
+        f.extend(["--level".to_string(), l.to_string()]);
+    }
+    if let Some(n) = a.episodes {
+        f.extend(["--episodes".to_string(), n.to_string()]);
+    }
+    f
+}
+
 /// The matrix file with the command line's overrides, checked again.
 fn matrix(a: &Sim2SimArgs) -> Result<Sim2SimConfig> {
     let mut c = sim2sim::load(&a.config)?;
@@ -204,21 +220,7 @@ fn other_build(
         .arg("--threads")
         .arg(a.threads.to_string())
         .arg("--this-build-only")
-        .args(
-            a.terrain
-                .iter()
-                .flat_map(|t| ["--terrain".to_string(), t.clone()]),
-        )
-        .args(
-            a.level
-                .iter()
-                .flat_map(|l| ["--level".to_string(), l.to_string()]),
-        )
-        .args(
-            a.episodes
-                .iter()
-                .flat_map(|n| ["--episodes".to_string(), n.to_string()]),
-        )
+        .args(override_flags(a))
         .stderr(std::process::Stdio::inherit())
         .output();
     let parsed = out.map_err(|e| e.to_string()).and_then(|o| {
