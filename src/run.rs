@@ -106,9 +106,11 @@ impl RunDir {
     }
 
     /// Reopen a run directory to resume it: `config.yaml` is rewritten from
-    /// `config`, and `metrics.csv` keeps its header and the rows whose first
-    /// column is at most `up_to` (rows written after the checkpoint being
-    /// resumed are dropped: the resumed run writes them again), then appends.
+    /// `config`, and `metrics.csv` keeps the rows whose first column is at most
+    /// `up_to` (rows written after the checkpoint being resumed are dropped:
+    /// the resumed run writes them again), then appends. The header is
+    /// `columns`; when they changed (a reward term added on resume), each kept
+    /// row is rewritten under them by name, `nan` where it had no value.
     pub fn resume(
         path: &Path,
         config: &impl Serialize,
@@ -117,14 +119,32 @@ impl RunDir {
     ) -> Result<RunDir, RunError> {
         let mpath = path.join("metrics.csv");
         let old = std::fs::read_to_string(&mpath).unwrap_or_default();
-        let kept: Vec<&str> = old
-            .lines()
-            .skip(1)
+        let mut lines = old.lines();
+        let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
+        let same = header == columns;
+        let kept: Vec<String> = lines
             .filter(|l| {
                 l.split(',')
                     .next()
                     .and_then(|v| v.parse::<f64>().ok())
                     .is_some_and(|v| v <= up_to)
+            })
+            .map(|l| {
+                if same {
+                    return l.to_string();
+                }
+                let values: Vec<&str> = l.split(',').collect();
+                columns
+                    .iter()
+                    .map(|c| {
+                        header
+                            .iter()
+                            .position(|h| h == c)
+                            .and_then(|i| values.get(i).copied())
+                            .unwrap_or("nan")
+                    })
+                    .collect::<Vec<_>>()
+                    .join(",")
             })
             .collect();
         let mut run = RunDir::create(path, config, columns)?;

@@ -247,3 +247,51 @@ fn g1_stands_on_a_flat_heightfield_as_on_a_plane() {
         "prism contacts on a flat heightfield: 1 - n_z = {tilt}"
     );
 }
+
+/// On a gap map the state measures heights from the surface the feet step
+/// over: a paper-table gap (0.2 m wide, 1 m deep) is filled in it, at the
+/// platforms' level, while the physics and the scandots keep the pit.
+#[test]
+fn gaps_are_filled_in_the_support_surface_only() {
+    let c = cfg(&[
+        "env.n_envs=1",
+        "env.terrain.map.kinds={gap: 1.0}",
+        "env.terrain.map.gap.gap=[0.2,0.2]",
+        "env.terrain.map.base_roughness=0.0",
+        "env.terrain.map.min_roughness=0.0",
+    ]);
+    let v = VecEnv::new(&c.env).unwrap();
+    let scene = &v.shared().scene;
+    let [lx, ly] = scene.terrain.as_ref().unwrap().extent();
+    let (mut pits, mut filled) = (0, 0);
+    let mut x = 0.0;
+    while x < lx {
+        let y = ly / 2.0;
+        if scene.ground(x, y) < -0.5 {
+            pits += 1;
+            // the platforms' level: the higher rim 0.3 m either side
+            let rim = scene.ground(x - 0.3, y).max(scene.ground(x + 0.3, y));
+            if (scene.support(x, y) - rim).abs() < 0.05 {
+                filled += 1;
+            }
+        }
+        x += 0.01;
+    }
+    assert!(pits > 50, "the map has gaps ({pits} samples in pits)");
+    assert!(
+        filled * 10 >= pits * 9,
+        "{filled} of {pits} pit samples filled"
+    );
+    // a support radius of 0 is the raw terrain
+    let raw = cfg(&[
+        "env.n_envs=1",
+        "env.terrain.support_radius=0.0",
+        "env.terrain.map.kinds={gap: 1.0}",
+    ]);
+    let v = VecEnv::new(&raw.env).unwrap();
+    let s = &v.shared().scene;
+    for k in 0..1000 {
+        let (x, y) = (lx * k as f64 / 1000.0, ly / 3.0);
+        assert_eq!(s.support(x, y), s.ground(x, y));
+    }
+}

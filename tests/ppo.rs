@@ -103,6 +103,30 @@ fn resumed_g1_run_is_bit_identical() {
     resume_matches("test/g1_tiny.yaml");
 }
 
+/// A term added on resume adds its column: the rows before the resume are
+/// rewritten under the new header (`nan` in the new column), so that the table
+/// still reads and plots.
+#[test]
+fn resume_with_a_new_reward_term_rewrites_the_metrics_header() {
+    let _t = torch_lock();
+    let dir = Scratch::new("newterm");
+    let cfg = load_config("test/g1_tiny.yaml", &["train.iterations=2"]);
+    runner::train(&cfg, &dir.0, false, true).unwrap();
+    let more = load_config(
+        "test/g1_tiny.yaml",
+        &["train.iterations=3", "env.rewards.terms.termination=-1.0"],
+    );
+    runner::train(&more, &dir.0, true, true).unwrap();
+    let term = column(&dir.0, "rew_termination");
+    assert_eq!(term.len(), 3);
+    assert!(term[..2].iter().all(|v| v.is_nan()), "{term:?}");
+    // the resumed row has the term as every other term: a value once an
+    // episode ended in it
+    let alive = column(&dir.0, "rew_alive");
+    assert_eq!(term[2].is_nan(), alive[2].is_nan(), "{term:?} {alive:?}");
+    assert_eq!(column(&dir.0, "iteration"), [1.0, 2.0, 3.0]);
+}
+
 #[test]
 fn kill_9_while_checkpointing_leaves_a_loadable_checkpoint() {
     let dir = Scratch::new("kill9");

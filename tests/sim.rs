@@ -369,3 +369,37 @@ fn warnings_are_counted_by_the_handler() {
         Some("deliberate test warning")
     );
 }
+
+/// The closing fills a pit narrower than its square to the lower rim, and
+/// leaves a step, a wide pit and a bump where they are.
+#[test]
+fn hfield_closing_fills_narrow_pits_only() {
+    // one row along x, copied into 7 rows: a 3-sample pit, a 9-sample pit, a step
+    let profile: [f32; 30] = [
+        0.5, 0.5, 0.5, 0.5, 0.0, 0.0, 0.0, 0.5, 0.5, 0.5, 0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+        0.0, 0.0, 0.5, 0.5, 0.5, 0.5, 0.9, 0.5, 0.7, 0.7, 0.7, 0.7,
+    ];
+    let (nrow, ncol) = (7, profile.len());
+    let data: Vec<f32> = (0..nrow).flat_map(|_| profile).collect();
+    let size = [1.45, 0.3, 1.0, 0.1];
+    let field = HeightField::new(nrow, ncol, size, [0.0; 3], data).unwrap();
+    let closed = field.closed(2);
+    let at = |h: &HeightField, c: usize| h.height(-size[0] + c as f64 * 0.1, 0.0);
+    for c in 4..7 {
+        assert!(
+            (at(&closed, c) - 0.5).abs() < 1e-6,
+            "narrow pit at {c} not filled"
+        );
+    }
+    for c in 11..20 {
+        assert!(at(&closed, c).abs() < 1e-6, "wide pit at {c} filled");
+    }
+    assert!((at(&closed, 24) - 0.9).abs() < 1e-6, "the bump moved");
+    for c in [0, 3, 7, 10, 20, 23, 26, 29] {
+        assert!(
+            (at(&closed, c) - at(&field, c)).abs() < 1e-9,
+            "sample {c} changed"
+        );
+    }
+    assert_eq!(field.closed(0).height(0.3, 0.1), field.height(0.3, 0.1));
+}

@@ -11,7 +11,7 @@ use dreampolicy::sim::{Data, HeightField, Model, ObjType};
 use dreampolicy::terrain::render::{lane_png_size, png_size, render_kind, render_lane, render_map};
 use dreampolicy::terrain::{
     tile_rng, Curriculum, LevelSampling, TerrainConfig, TerrainError, TerrainKind, TerrainMap,
-    TileParams, WaveParams, COMBINED_PAIRS,
+    TileParams, UnevenParams, WaveParams, COMBINED_PAIRS,
 };
 
 const SEEDS: [u64; 3] = [1, 2, 3];
@@ -519,6 +519,41 @@ fn uneven_blocks_have_heights_in_the_range() {
             raised * 5 > total,
             "blocks cover {raised} of {total} samples"
         );
+    }
+}
+
+/// `uneven.width` as wide as the tile lays strips: every block spans the tile
+/// across y, so the height changes only along x (edges that cross the walk),
+/// and the heights are still the paper's blocks.
+#[test]
+fn uneven_width_lays_strips_across_the_walk() {
+    let cfg = TerrainConfig {
+        num_levels: 2,
+        num_cols: 2,
+        kinds: [(TerrainKind::Uneven, 1.0)].into(),
+        base_roughness: 0.0,
+        min_roughness: 0.0,
+        uneven: UnevenParams {
+            width: Some(Curriculum([4.0, 4.0])),
+            ..UnevenParams::default()
+        },
+        ..TerrainConfig::default()
+    };
+    let map = TerrainMap::generate(&cfg, 3).unwrap();
+    for (level, col) in [(0, 0), (1, 1)] {
+        let t = Tile::of(&map, level, col);
+        let mut steps = 0;
+        for i in 0..t.nx {
+            let h0 = t.h(i, 0);
+            for j in 0..t.ny {
+                assert!(
+                    (t.h(i, j) - h0).abs() < 1e-9,
+                    "level {level}: ({i}, {j}) differs across y"
+                );
+            }
+            steps += usize::from(i > 0 && (h0 - t.h(i - 1, 0)).abs() > 0.05);
+        }
+        assert!(steps >= 4, "level {level}: {steps} edges along x");
     }
 }
 

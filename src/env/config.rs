@@ -355,6 +355,13 @@ pub struct TerrainSetting {
     /// than with a plane even when flat (README, "Benchmarks"). Their flat tiles
     /// then have no base roughness.
     pub flat_on_plane: bool,
+    /// Pits narrower than about twice this (m) are filled in the surface that
+    /// the pelvis and feet heights of the state are measured from (the swing
+    /// and base-height rewards, the fall check): over a 0.2 m gap the swing
+    /// target is the platforms' level, not the pit's floor a metre down. 0:
+    /// the raw heightfield (the runs before 2026-12-03 trained so). Scandots
+    /// and collisions always see the raw terrain.
+    pub support_radius: f64,
 }
 
 impl Default for TerrainSetting {
@@ -366,6 +373,7 @@ impl Default for TerrainSetting {
             init_max_level: 2,
             seed: 0,
             flat_on_plane: true,
+            support_radius: 0.2,
         }
     }
 }
@@ -487,6 +495,12 @@ impl EnvConfig {
         }
         if self.domain_rand.model_buckets == 0 {
             return bad("env.domain_rand.model_buckets must be >= 1".into());
+        }
+        let r = self.terrain.support_radius;
+        if !(r.is_finite() && (0.0..=2.0).contains(&r)) {
+            return bad(format!(
+                "env.terrain.support_radius must be in [0, 2] m, got {r}"
+            ));
         }
         if self.terrain.mode == TerrainMode::Map {
             self.terrain

@@ -410,7 +410,9 @@ impl LocoEnv {
     fn derive_state(&mut self, sh: &EnvShared) {
         let scene = &sh.scene;
         let on_plane = self.on_plane;
-        let ground = |x: f64, y: f64| ground_at(on_plane, scene, x, y);
+        // heights above the ground are measured from the surface a foot steps
+        // over, not from a pit's floor
+        let ground = |x: f64, y: f64| support_at(on_plane, scene, x, y);
         let g1 = &scene.g1;
         let d = &self.data;
         let s = &mut self.state;
@@ -583,6 +585,15 @@ fn ground_at(on_plane: bool, scene: &super::Scene, x: f64, y: f64) -> f64 {
         0.0
     } else {
         scene.ground(x, y)
+    }
+}
+
+/// The surface the feet step over ([`super::Scene::support`]; 0 on a plane).
+fn support_at(on_plane: bool, scene: &super::Scene, x: f64, y: f64) -> f64 {
+    if on_plane {
+        0.0
+    } else {
+        scene.support(x, y)
     }
 }
 

@@ -60,6 +60,11 @@ pub struct Scene {
     pub terrain: Option<Arc<TerrainMap>>,
     /// Rust-side height lookup of the uploaded heightfield (None on a plane).
     pub heights: Option<Arc<HeightField>>,
+    /// The surface the feet step over: `heights` with pits narrower than
+    /// `terrain.support_radius` filled ([`HeightField::closed`]). Heights above
+    /// the ground in the state (pelvis, feet) are measured from it, so that a
+    /// swing over a gap is not asked to reach into the pit.
+    pub support: Option<Arc<HeightField>>,
     pub body_class: Vec<BodyClass>,
     /// Robot weight (N) of the nominal model, for normalizing forces.
     pub robot_weight: f64,
@@ -96,6 +101,13 @@ impl Scene {
             }
             None => None,
         };
+        let support = heights.as_ref().map(|h| {
+            let cells = (cfg.terrain.support_radius / h.size()[0] * (h.ncol() - 1) as f64 / 2.0
+                - 1e-9)
+                .ceil()
+                .max(0.0) as usize;
+            Arc::new(h.closed(cells))
+        });
         let body_class = classify_bodies(&model, &g1, &cfg.termination.contact_bodies)?;
         let robot_weight = model.body_subtreemass()[g1.pelvis] * 9.81;
         // envs on Flat columns step on a scene compiled with a plane instead
@@ -137,6 +149,7 @@ impl Scene {
             g1,
             terrain,
             heights,
+            support,
             body_class,
             robot_weight,
             plane_models,
@@ -147,6 +160,12 @@ impl Scene {
     #[inline]
     pub fn ground(&self, x: f64, y: f64) -> f64 {
         self.heights.as_ref().map_or(0.0, |h| h.height(x, y))
+    }
+
+    /// Height of the surface the feet step over at a world point (0 on a plane).
+    #[inline]
+    pub fn support(&self, x: f64, y: f64) -> f64 {
+        self.support.as_ref().map_or(0.0, |h| h.height(x, y))
     }
 
     /// Whether the env bound to map column `col` runs on the plane models.

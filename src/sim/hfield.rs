@@ -142,6 +142,28 @@ impl HeightField {
         self.to_world(h)
     }
 
+    /// The surface a foot steps over: the field's morphological closing (a
+    /// max filter, then a min filter, over a square of `2 radius + 1` samples).
+    /// Pits narrower than the square (a gap between platforms, a sliver
+    /// between two blocks) are filled to the lower of their rims; monotone
+    /// edges (a riser, a block's side wider than the square) and anything
+    /// higher than its surroundings are left where they are. `radius == 0` is
+    /// the field itself.
+    pub fn closed(&self, radius: usize) -> HeightField {
+        let mut data = self.data.clone();
+        if radius > 0 {
+            let (nr, nc) = (self.nrow, self.ncol);
+            let max = |a: f32, b: f32| a.max(b);
+            let min = |a: f32, b: f32| a.min(b);
+            running(&mut data, nr, nc, radius, max);
+            running(&mut data, nr, nc, radius, min);
+        }
+        HeightField {
+            data,
+            ..self.clone()
+        }
+    }
+
     /// World height by bilinear interpolation of the four cell corners.
     #[inline]
     pub fn height_bilinear(&self, x: f64, y: f64) -> f64 {
@@ -149,5 +171,28 @@ impl HeightField {
         let (h00, h10, h01, h11) = self.corners(r, c);
         let h = (1.0 - v) * ((1.0 - u) * h00 + u * h10) + v * ((1.0 - u) * h01 + u * h11);
         self.to_world(h)
+    }
+}
+
+/// Replace every sample of a row-major `nr x nc` grid by `op` over the square of
+/// `2 radius + 1` samples around it (clipped at the edges): along rows, then
+/// along columns (separable for max and min).
+fn running(data: &mut [f32], nr: usize, nc: usize, radius: usize, op: impl Fn(f32, f32) -> f32) {
+    let mut line = Vec::new();
+    for r in 0..nr {
+        line.clear();
+        line.extend_from_slice(&data[r * nc..(r + 1) * nc]);
+        for c in 0..nc {
+            let (lo, hi) = (c.saturating_sub(radius), (c + radius).min(nc - 1));
+            data[r * nc + c] = line[lo..=hi].iter().copied().reduce(&op).unwrap_or(line[c]);
+        }
+    }
+    for c in 0..nc {
+        line.clear();
+        line.extend((0..nr).map(|r| data[r * nc + c]));
+        for r in 0..nr {
+            let (lo, hi) = (r.saturating_sub(radius), (r + radius).min(nr - 1));
+            data[r * nc + c] = line[lo..=hi].iter().copied().reduce(&op).unwrap_or(line[r]);
+        }
     }
 }

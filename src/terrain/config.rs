@@ -104,6 +104,12 @@ params!(
         height: Curriculum = Curriculum([0.10, 0.20]),
         /// Block side (m), drawn separately along x and y.
         size: Curriculum = Curriculum([0.40, 0.70]),
+        /// Block side across the walking direction (along y, m), a training
+        /// curriculum beside the paper's table: unset (the paper's table), `size`.
+        /// Wide blocks at the low levels are strips whose edges all cross the
+        /// walking direction, as a stair's do; narrowing them brings the
+        /// sideways edges in one level at a time.
+        width: Option<Curriculum> = None,
         /// Block count per `reference_area`.
         count: Curriculum = Curriculum([150.0, 200.0]),
         /// The area the paper's counts refer to: its 8 m x 8 m tiles (m^2). The
@@ -371,6 +377,11 @@ impl TerrainConfig {
         for (field, c, min) in [
             ("uneven.height", self.uneven.height, 0.0),
             ("uneven.size", self.uneven.size, positive),
+            (
+                "uneven.width",
+                self.uneven.width.unwrap_or(Curriculum([1.0, 1.0])),
+                positive,
+            ),
             ("uneven.count", self.uneven.count, 0.0),
             ("stair.height", self.stair.height, 0.0),
             ("stair.tread", self.stair.tread, positive),

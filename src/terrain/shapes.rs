@@ -216,7 +216,9 @@ fn uneven<R: Rng + ?Sized>(c: &mut Canvas, r: Region, ctx: &Ctx, rng: &mut R) ->
     let blocks = (ctx.draw(&p.count, rng) * area / p.reference_area).round() as usize;
     for _ in 0..blocks {
         let sx = c.cells(ctx.draw(&p.size, rng), 1).min(r.len());
-        let sy = c.cells(ctx.draw(&p.size, rng), 1).min(c.ny);
+        let sy = c
+            .cells(ctx.draw(p.width.as_ref().unwrap_or(&p.size), rng), 1)
+            .min(c.ny);
         let i = rng.random_range(r.i0..=r.i1 - sx);
         let j = rng.random_range(0..=c.ny - sy);
         let sign = if rng.random::<bool>() { 1.0 } else { -1.0 };
