@@ -557,6 +557,44 @@ fn uneven_width_lays_strips_across_the_walk() {
     }
 }
 
+/// `uneven.raised_fraction` 1 raises every block and 0 lowers every one (the
+/// probes that compare step-ups with step-downs).
+#[test]
+fn uneven_raised_fraction_picks_the_blocks_sign() {
+    for (fraction, sign) in [(1.0, 1.0), (0.0, -1.0)] {
+        let cfg = TerrainConfig {
+            num_levels: 2,
+            num_cols: 1,
+            kinds: [(TerrainKind::Uneven, 1.0)].into(),
+            base_roughness: 0.0,
+            min_roughness: 0.0,
+            uneven: UnevenParams {
+                raised_fraction: fraction,
+                ..UnevenParams::default()
+            },
+            ..TerrainConfig::default()
+        };
+        let map = TerrainMap::generate(&cfg, 5).unwrap();
+        let t = Tile::of(&map, 1, 0);
+        let (mut blocks, mut wrong) = (0, 0);
+        for i in 0..t.nx {
+            for j in 0..t.ny {
+                let h = t.h(i, j) * sign;
+                blocks += usize::from(h > 0.05);
+                wrong += usize::from(h < -1e-9);
+            }
+        }
+        assert!(
+            blocks > t.nx * t.ny / 5,
+            "raised_fraction {fraction}: {blocks} block samples"
+        );
+        assert_eq!(
+            wrong, 0,
+            "raised_fraction {fraction}: blocks of the other sign"
+        );
+    }
+}
+
 /// `(values at level 0, mean value at the top level)` of `f` over the tiles of
 /// `kind` in a two-level map with many columns per kind, for three seeds.
 fn ends(kind: TerrainKind, f: impl Fn(&TileParams) -> f64) -> (Vec<f64>, f64) {

@@ -110,6 +110,8 @@ params!(
         /// walking direction, as a stair's do; narrowing them brings the
         /// sideways edges in one level at a time.
         width: Option<Curriculum> = None,
+        /// Chance that a block is raised rather than lowered (the paper: even).
+        raised_fraction: f64 = 0.5,
         /// Block count per `reference_area`.
         count: Curriculum = Curriculum([150.0, 200.0]),
         /// The area the paper's counts refer to: its 8 m x 8 m tiles (m^2). The
@@ -344,6 +346,13 @@ impl TerrainConfig {
         ] {
             check(v > 0.0, field, v, "must be positive")?;
         }
+        let rf = self.uneven.raised_fraction;
+        check(
+            (0.0..=1.0).contains(&rf),
+            "uneven.raised_fraction",
+            rf,
+            "must be in [0, 1]",
+        )?;
         for (field, v) in [
             ("base_roughness", self.base_roughness),
             ("min_roughness", self.min_roughness),

@@ -221,7 +221,14 @@ fn uneven<R: Rng + ?Sized>(c: &mut Canvas, r: Region, ctx: &Ctx, rng: &mut R) ->
             .min(c.ny);
         let i = rng.random_range(r.i0..=r.i1 - sx);
         let j = rng.random_range(0..=c.ny - sy);
-        let sign = if rng.random::<bool>() { 1.0 } else { -1.0 };
+        // an even chance draws a bool, as before the parameter existed, so that
+        // the paper's lanes stay the ones every earlier eval scored
+        let raised = if p.raised_fraction == 0.5 {
+            rng.random::<bool>()
+        } else {
+            rng.random::<f64>() < p.raised_fraction
+        };
+        let sign = if raised { 1.0 } else { -1.0 };
         let h = sign * quantize(ctx.draw(&p.height, rng), vs);
         c.fill(i..i + sx, j..j + sy, h);
     }
