@@ -310,13 +310,37 @@ fn play_on_an_uneven_lane_draws_its_heightfield() {
             (lo.min(z), hi.max(z))
         });
     assert!(hi - lo > 0.1, "heights {lo}..{hi}");
-    // the mesh is the ground the physics sees: under the pelvis, at every frame,
-    // the mesh's height (MuJoCo's diagonal split) is pelvis z - base_height
+    // the mesh is the ground the physics sees, and base_height is measured from
+    // its closing (`env.terrain.support_radius`, 0.2 m: a max, then a min filter
+    // over 9 x 9 samples): under the pelvis, at every frame, the closed mesh's
+    // height (MuJoCo's diagonal split) is pelvis z - base_height
     let xs: BTreeSet<i64> = points.iter().map(|q| (f(q, "x") * 1e4) as i64).collect();
     let w = xs.len();
     let (x0, y0) = (f(&points[0], "x"), f(&points[0], "y"));
     let hs = f(&points[1], "x") - x0;
-    let z = |i: usize, j: usize| f(&points[j * w + i], "z");
+    let rows = points.len() / w;
+    let radius = (0.2 / hs - 1e-9).ceil() as usize;
+    let raw: Vec<f64> = points.iter().map(|q| f(q, "z")).collect();
+    let filter = |src: &[f64], max: bool| -> Vec<f64> {
+        let mut out = vec![0.0; src.len()];
+        for j in 0..rows {
+            for i in 0..w {
+                let (i0, i1) = (i.saturating_sub(radius), (i + radius).min(w - 1));
+                let (j0, j1) = (j.saturating_sub(radius), (j + radius).min(rows - 1));
+                let cells = (j0..=j1).flat_map(|jj| (i0..=i1).map(move |ii| jj * w + ii));
+                let vals = cells.map(|k| src[k]);
+                out[j * w + i] = if max {
+                    vals.fold(f64::NEG_INFINITY, f64::max)
+                } else {
+                    vals.fold(f64::INFINITY, f64::min)
+                };
+            }
+        }
+        out
+    };
+    let closed = filter(&filter(&raw, true), false);
+    assert!(closed.iter().zip(&raw).all(|(c, r)| c >= r), "a closing only fills");
+    let z = |i: usize, j: usize| closed[j * w + i];
     for (_, st) in &p.messages["/state"] {
         let (u, v) = ((f(st, "x") - x0) / hs, (f(st, "y") - y0) / hs);
         let (i, j) = (u.floor() as usize, v.floor() as usize);
