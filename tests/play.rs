@@ -339,7 +339,10 @@ fn play_on_an_uneven_lane_draws_its_heightfield() {
         out
     };
     let closed = filter(&filter(&raw, true), false);
-    assert!(closed.iter().zip(&raw).all(|(c, r)| c >= r), "a closing only fills");
+    assert!(
+        closed.iter().zip(&raw).all(|(c, r)| c >= r),
+        "a closing only fills"
+    );
     let z = |i: usize, j: usize| closed[j * w + i];
     for (_, st) in &p.messages["/state"] {
         let (u, v) = ((f(st, "x") - x0) / hs, (f(st, "y") - y0) / hs);
