@@ -122,6 +122,11 @@ impl RunDir {
         let mut lines = old.lines();
         let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
         let same = header == columns;
+        // where each new column was in the old header
+        let from: Vec<Option<usize>> = columns
+            .iter()
+            .map(|c| header.iter().position(|h| h == c))
+            .collect();
         let kept: Vec<String> = lines
             .filter(|l| {
                 l.split(',')
@@ -134,15 +139,8 @@ impl RunDir {
                     return l.to_string();
                 }
                 let values: Vec<&str> = l.split(',').collect();
-                columns
-                    .iter()
-                    .map(|c| {
-                        header
-                            .iter()
-                            .position(|h| h == c)
-                            .and_then(|i| values.get(i).copied())
-                            .unwrap_or("nan")
-                    })
+                from.iter()
+                    .map(|i| i.and_then(|i| values.get(i).copied()).unwrap_or("nan"))
                     .collect::<Vec<_>>()
                     .join(",")
             })

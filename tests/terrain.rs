@@ -522,24 +522,34 @@ fn uneven_blocks_have_heights_in_the_range() {
     }
 }
 
+/// A two-level map of `cols` uneven columns with `uneven`'s blocks and no
+/// roughness, drawn with `seed`.
+fn uneven_map(cols: usize, uneven: UnevenParams, seed: u64) -> TerrainMap {
+    let cfg = TerrainConfig {
+        num_levels: 2,
+        num_cols: cols,
+        kinds: [(TerrainKind::Uneven, 1.0)].into(),
+        base_roughness: 0.0,
+        min_roughness: 0.0,
+        uneven,
+        ..TerrainConfig::default()
+    };
+    TerrainMap::generate(&cfg, seed).unwrap()
+}
+
 /// `uneven.width` as wide as the tile lays strips: every block spans the tile
 /// across y, so the height changes only along x (edges that cross the walk),
 /// and the heights are still the paper's blocks.
 #[test]
 fn uneven_width_lays_strips_across_the_walk() {
-    let cfg = TerrainConfig {
-        num_levels: 2,
-        num_cols: 2,
-        kinds: [(TerrainKind::Uneven, 1.0)].into(),
-        base_roughness: 0.0,
-        min_roughness: 0.0,
-        uneven: UnevenParams {
+    let map = uneven_map(
+        2,
+        UnevenParams {
             width: Some(Curriculum([4.0, 4.0])),
             ..UnevenParams::default()
         },
-        ..TerrainConfig::default()
-    };
-    let map = TerrainMap::generate(&cfg, 3).unwrap();
+        3,
+    );
     for (level, col) in [(0, 0), (1, 1)] {
         let t = Tile::of(&map, level, col);
         let mut steps = 0;
@@ -562,19 +572,14 @@ fn uneven_width_lays_strips_across_the_walk() {
 #[test]
 fn uneven_raised_fraction_picks_the_blocks_sign() {
     for (fraction, sign) in [(1.0, 1.0), (0.0, -1.0)] {
-        let cfg = TerrainConfig {
-            num_levels: 2,
-            num_cols: 1,
-            kinds: [(TerrainKind::Uneven, 1.0)].into(),
-            base_roughness: 0.0,
-            min_roughness: 0.0,
-            uneven: UnevenParams {
+        let map = uneven_map(
+            1,
+            UnevenParams {
                 raised_fraction: fraction,
                 ..UnevenParams::default()
             },
-            ..TerrainConfig::default()
-        };
-        let map = TerrainMap::generate(&cfg, 5).unwrap();
+            5,
+        );
         let t = Tile::of(&map, 1, 0);
         let (mut blocks, mut wrong) = (0, 0);
         for i in 0..t.nx {

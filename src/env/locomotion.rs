@@ -398,7 +398,7 @@ impl LocoEnv {
     /// Height of the ground this env's physics sees.
     #[inline]
     pub fn ground(&self, sh: &EnvShared, x: f64, y: f64) -> f64 {
-        ground_at(self.on_plane, &sh.scene, x, y)
+        height_on(self.on_plane, sh.scene.heights.as_deref(), x, y)
     }
 
     /// Whether this env runs on a plane in place of its Flat tiles (scene doc).
@@ -412,7 +412,8 @@ impl LocoEnv {
         let on_plane = self.on_plane;
         // heights above the ground are measured from the surface a foot steps
         // over, not from a pit's floor
-        let ground = |x: f64, y: f64| support_at(on_plane, scene, x, y);
+        let support = scene.support.as_deref();
+        let ground = |x: f64, y: f64| height_on(on_plane, support, x, y);
         let g1 = &scene.g1;
         let d = &self.data;
         let s = &mut self.state;
@@ -572,28 +573,20 @@ impl LocoEnv {
             robot_weight: scene.robot_weight,
             bucket: scene.buckets[self.bucket],
             latency: self.latency,
-            ground: &|x, y| ground_at(on_plane, scene, x, y),
+            ground: &|x, y| height_on(on_plane, scene.heights.as_deref(), x, y),
         };
         obs::write(&ctx, &mut self.rng, obs, critic, scan);
     }
 }
 
-/// The ground an env's physics sees: its plane, or the scene's terrain.
+/// Height of `field` (the scene's terrain, `Scene::heights`, or the surface
+/// the feet step over, `Scene::support`) for an env: 0 when the env steps on
+/// its plane or the scene has no heightfield.
 #[inline]
-fn ground_at(on_plane: bool, scene: &super::Scene, x: f64, y: f64) -> f64 {
-    if on_plane {
-        0.0
-    } else {
-        scene.ground(x, y)
-    }
-}
-
-/// The surface the feet step over ([`super::Scene::support`]; 0 on a plane).
-fn support_at(on_plane: bool, scene: &super::Scene, x: f64, y: f64) -> f64 {
-    if on_plane {
-        0.0
-    } else {
-        scene.support(x, y)
+fn height_on(on_plane: bool, field: Option<&crate::sim::HeightField>, x: f64, y: f64) -> f64 {
+    match field {
+        Some(h) if !on_plane => h.height(x, y),
+        _ => 0.0,
     }
 }
 

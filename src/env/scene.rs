@@ -102,10 +102,7 @@ impl Scene {
             None => None,
         };
         let support = heights.as_ref().map(|h| {
-            let cells = (cfg.terrain.support_radius / h.size()[0] * (h.ncol() - 1) as f64 / 2.0
-                - 1e-9)
-                .ceil()
-                .max(0.0) as usize;
+            let cells = (cfg.terrain.support_radius / h.dx() - 1e-9).ceil().max(0.0) as usize;
             Arc::new(h.closed(cells))
         });
         let body_class = classify_bodies(&model, &g1, &cfg.termination.contact_bodies)?;

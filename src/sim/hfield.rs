@@ -99,6 +99,10 @@ impl HeightField {
     pub fn origin(&self) -> [f64; 3] {
         self.origin
     }
+    /// Sample spacing along x (m).
+    pub fn dx(&self) -> f64 {
+        self.dx
+    }
 
     /// Cell coordinates of a world point, clamped to the field: `(r, c, u, v)`
     /// with `u` along x (columns) and `v` along y (rows), both in [0, 1].
@@ -179,20 +183,17 @@ impl HeightField {
 /// along columns (separable for max and min).
 fn running(data: &mut [f32], nr: usize, nc: usize, radius: usize, op: impl Fn(f32, f32) -> f32) {
     let mut line = Vec::new();
-    for r in 0..nr {
-        line.clear();
-        line.extend_from_slice(&data[r * nc..(r + 1) * nc]);
-        for c in 0..nc {
-            let (lo, hi) = (c.saturating_sub(radius), (c + radius).min(nc - 1));
-            data[r * nc + c] = line[lo..=hi].iter().copied().reduce(&op).unwrap_or(line[c]);
-        }
-    }
-    for c in 0..nc {
-        line.clear();
-        line.extend((0..nr).map(|r| data[r * nc + c]));
-        for r in 0..nr {
-            let (lo, hi) = (r.saturating_sub(radius), (r + radius).min(nr - 1));
-            data[r * nc + c] = line[lo..=hi].iter().copied().reduce(&op).unwrap_or(line[r]);
+    // (lines, samples a line, stride between lines, stride along a line)
+    let (rows, cols) = ((nr, nc, nc, 1), (nc, nr, 1, nc));
+    for (lines, n, between, along) in [rows, cols] {
+        for l in 0..lines {
+            let at = |k: usize| l * between + k * along;
+            line.clear();
+            line.extend((0..n).map(|k| data[at(k)]));
+            for k in 0..n {
+                let (lo, hi) = (k.saturating_sub(radius), (k + radius).min(n - 1));
+                data[at(k)] = line[lo..=hi].iter().copied().reduce(&op).unwrap_or(line[k]);
+            }
         }
     }
 }
