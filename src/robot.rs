@@ -118,6 +118,12 @@ pub const TORSO: &str = "torso_link";
 /// Feet: the ankle-roll links carry the foot collision capsules.
 pub const FEET: [&str; 2] = ["left_ankle_roll_link", "right_ankle_roll_link"];
 pub const KNEES: [&str; 2] = ["left_knee_link", "right_knee_link"];
+/// Heel and toe of the sole along the foot's x axis, in the ankle-roll link's
+/// frame (m): the foot collision capsules span -0.054..0.132.
+pub const SOLE_HEEL_TOE_X: [f64; 2] = [-0.05, 0.13];
+/// Half the sole's width (m): its capsules lie within y = +-0.026 of the
+/// ankle-roll link's x axis.
+pub const SOLE_HALF_WIDTH: f64 = 0.026;
 /// Sites at the sole (vendor sites).
 pub const FOOT_SITES: [&str; 2] = ["left_foot", "right_foot"];
 /// IMU site on the pelvis (the observation's angular velocity is measured here).

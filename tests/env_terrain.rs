@@ -295,3 +295,130 @@ fn gaps_are_filled_in_the_support_surface_only() {
         assert_eq!(s.support(x, y), s.ground(x, y));
     }
 }
+
+/// Stand env 0's robot `dx` along the lane from `start`, its pelvis at standing
+/// height above the support surface, still, and step once; false when the
+/// step ended its episode.
+fn stand_at(v: &mut VecEnv, start: [f64; 3], dx: f64) -> bool {
+    let zeros = vec![0.0f32; NUM_JOINTS];
+    let x = start[0] + dx;
+    let z = v.shared().scene.support(x, start[1]) + 0.8;
+    let d = v.data_mut(0).unwrap();
+    d.qpos_mut()[0] = x;
+    d.qpos_mut()[2] = z;
+    d.qvel_mut().iter_mut().for_each(|q| *q = 0.0);
+    d.forward();
+    v.step(&zeros);
+    !v.outcomes[0].episode_done
+}
+
+/// `feet_over_pit` and `feet_straddle` (the `feet_gap` and `feet_straddle`
+/// terms' inputs) against the raw terrain under the sole's ends: a heel or toe
+/// above a 1 m pit is over it, a sole with both ends on platforms is not, and
+/// one with an end on each straddles the edge.
+#[test]
+fn feet_over_pit_reads_the_soles_ends() {
+    let c = cfg(&[
+        "env.n_envs=1",
+        "env.terrain.map.kinds={gap: 1.0}",
+        "env.terrain.map.gap.gap=[0.2,0.2]",
+        "env.terrain.map.gap.depth=[1.0,1.0]",
+        "env.terrain.map.base_roughness=0.0",
+        "env.terrain.map.min_roughness=0.0",
+        "env.terrain.init_max_level=0",
+    ]);
+    let mut v = VecEnv::new(&c.env).unwrap();
+    v.step(&[0.0f32; NUM_JOINTS]);
+    let start = v.envs()[0].state().base_pos;
+    let (mut over, mut across, mut clear) = (0, 0, 0);
+    for k in 0..80 {
+        if !stand_at(&mut v, start, 0.025 * k as f64) {
+            continue;
+        }
+        let s = v.envs()[0].state();
+        let scene = &v.shared().scene;
+        for f in 0..2 {
+            let [fx, fy, _] = s.feet_pos[f];
+            let ends =
+                [-0.05, 0.13].map(|a| scene.ground(fx + a * s.yaw.cos(), fy + a * s.yaw.sin()));
+            let at = format!("foot {f} at {:?}: ends {ends:?}", s.feet_pos[f]);
+            if ends.iter().any(|&h| h < -0.5) {
+                assert!(s.feet_over_pit[f], "{at}");
+                over += 1;
+                if ends.iter().any(|&h| h.abs() < 0.01) {
+                    assert!(s.feet_straddle[f], "{at}");
+                    across += 1;
+                }
+            } else if [-0.09, -0.05, 0.13, 0.17].iter().all(|&a| {
+                // both ends on a platform with 4 cm to spare (the foot's own
+                // yaw moves its corners by a few mm against the pelvis's)
+                scene
+                    .ground(fx + a * s.yaw.cos(), fy + a * s.yaw.sin())
+                    .abs()
+                    < 0.01
+            }) {
+                assert!(!s.feet_over_pit[f] && !s.feet_straddle[f], "{at}");
+                clear += 1;
+            }
+        }
+    }
+    assert!(
+        over > 5 && across > 2 && clear > 5,
+        "{over} feet over pits ({across} across an edge), {clear} on platforms"
+    );
+}
+
+/// `swing_lookahead`: the swing terms' ground is the highest support surface
+/// from under the foot to the lookahead ahead, so it rises before a riser
+/// reaches the foot; without a lookahead it is the ground under the foot.
+#[test]
+fn swing_ground_looks_ahead_on_stairs() {
+    let stairs = |ahead: &str| {
+        cfg(&[
+            "env.n_envs=1",
+            "env.terrain.map.kinds={stair: 1.0}",
+            "env.terrain.map.base_roughness=0.0",
+            "env.terrain.map.min_roughness=0.0",
+            "env.terrain.init_max_level=0",
+            ahead,
+        ])
+    };
+    for (ahead, lookahead) in [
+        ("env.rewards.params.swing_lookahead=0.3", 0.3),
+        ("env.rewards.params.swing_lookahead=0.0", 0.0),
+    ] {
+        let mut v = VecEnv::new(&stairs(ahead).env).unwrap();
+        v.step(&[0.0f32; NUM_JOINTS]);
+        let start = v.envs()[0].state().base_pos;
+        let mut raised = 0;
+        for k in 0..120 {
+            if !stand_at(&mut v, start, 0.025 * k as f64) {
+                continue;
+            }
+            let s = v.envs()[0].state();
+            for f in 0..2 {
+                let (under, swing) = (s.feet_ground[f], s.feet_swing_ground[f]);
+                assert!(swing >= under, "foot {f}: {swing} below {under}");
+                if lookahead == 0.0 {
+                    assert_eq!(swing, under);
+                } else if swing > under + 0.02 {
+                    // a riser within the lookahead: the support there is this high
+                    let scene = &v.shared().scene;
+                    let [fx, fy, _] = s.feet_pos[f];
+                    let top = (0..=6)
+                        .map(|i| {
+                            let d = 0.05 * i as f64;
+                            scene.support(fx + d * s.yaw.cos(), fy + d * s.yaw.sin())
+                        })
+                        .fold(f64::NEG_INFINITY, f64::max);
+                    assert!((top - swing).abs() < 1e-9, "foot {f}: {swing} vs {top}");
+                    raised += 1;
+                }
+            }
+        }
+        assert!(
+            lookahead == 0.0 || raised > 5,
+            "{raised} feet before a riser"
+        );
+    }
+}

@@ -99,7 +99,7 @@ fn specialist_terms_by_hand() {
     close(term("feet_yaw", &s), 0.01 + 0.09);
     // swing foot height, clipped at the clearance target (0.08)
     s.feet_contact = [false, true];
-    s.feet_ground = [0.0, 0.0];
+    s.feet_swing_ground = [0.0, 0.0];
     close(term("foot_height", &s), 0.05);
     s.feet_pos[0][2] = 0.3;
     close(term("foot_height", &s), 0.08);
@@ -116,6 +116,16 @@ fn specialist_terms_by_hand() {
     close(term("feet_edge", &s), 0.0);
     s.terrain_level = 4;
     close(term("feet_edge", &s), 1.0);
+    // feet over a pit count in contact only, at every level
+    s.feet_over_pit = [true, true];
+    s.terrain_level = 0;
+    close(term("feet_gap", &s), 1.0);
+    s.feet_over_pit = [false, true];
+    close(term("feet_gap", &s), 0.0);
+    s.feet_straddle = [true, false];
+    close(term("feet_straddle", &s), 1.0);
+    s.feet_contact = [false, true];
+    close(term("feet_straddle", &s), 0.0);
     s.reached_goal = true;
     close(term("goal", &s), 1.0);
     s.terminated = true;
@@ -282,7 +292,7 @@ fn foot_lifting_terms_by_hand() {
     close(term("feet_air_time_biped", &s), 0.0);
 
     // velocity-weighted clearance: a still foot costs nothing at any height
-    s.feet_ground = [0.1, 0.1];
+    s.feet_swing_ground = [0.1, 0.1];
     s.feet_pos = [[0.0, 0.1, 0.136], [0.0, -0.1, 0.13]];
     s.feet_vel = [[0.0; 3], [0.0; 3]];
     close(term("foot_clearance", &s), 1.0);
@@ -306,7 +316,7 @@ fn foot_lifting_terms_by_hand() {
     // the right leg is half a period later
     close(swing_clock_target(mid - 0.5, 1, &p).unwrap(), a + h);
     s.gait_phase = mid;
-    s.feet_ground = [0.0, 0.0];
+    s.feet_swing_ground = [0.0, 0.0];
     s.feet_pos[0][2] = a; // left foot kept down in its swing: pays h^2
     s.feet_pos[1][2] = a; // right leg in stance by the clock: free
     s.feet_contact = [true, true];

@@ -26,6 +26,9 @@ use crate::env::config::TerrainMode;
 use crate::robot::NUM_JOINTS;
 use crate::sim::{contact_geoms, Data, SimError};
 
+/// Spacing (m) of the support samples ahead of a foot (`swing_lookahead`).
+const LOOKAHEAD_STEP: f64 = 0.05;
+
 /// Longest supported action latency (control steps).
 pub const MAX_LATENCY: usize = 8;
 
@@ -445,11 +448,34 @@ impl LocoEnv {
             s.feet_pos[f] = p;
             s.feet_rpy[f] = rpy(&xmat[g1.feet[f]]);
             s.feet_ground[f] = ground(s.feet_pos[f][0], s.feet_pos[f][1]);
+            let ahead = sh.rewards.params.swing_lookahead;
+            let (cy, sy) = (s.yaw.cos(), s.yaw.sin());
+            s.feet_swing_ground[f] = (1..=(ahead / LOOKAHEAD_STEP).round() as usize)
+                .map(|k| {
+                    let d = k as f64 * LOOKAHEAD_STEP;
+                    ground(s.feet_pos[f][0] + d * cy, s.feet_pos[f][1] + d * sy)
+                })
+                .fold(s.feet_ground[f], f64::max);
             s.feet_on_edge[f] = !on_plane
                 && scene
                     .terrain
                     .as_ref()
                     .is_some_and(|m| m.is_edge(s.feet_pos[f][0], s.feet_pos[f][1]));
+            s.feet_over_pit[f] = !on_plane
+                && over_pit(
+                    scene.heights.as_deref(),
+                    support,
+                    p,
+                    &xmat[g1.feet[f]],
+                    sh.rewards.params.feet_gap_depth,
+                );
+            s.feet_straddle[f] = !on_plane
+                && straddles(
+                    scene.heights.as_deref(),
+                    p,
+                    &xmat[g1.feet[f]],
+                    sh.rewards.params.straddle_height,
+                );
             s.knees_pos[f] = xpos[g1.knees[f]];
         }
 
@@ -588,6 +614,49 @@ fn height_on(on_plane: bool, field: Option<&crate::sim::HeightField>, x: f64, y:
         Some(h) if !on_plane => h.height(x, y),
         _ => 0.0,
     }
+}
+
+/// Whether the heel or the toe of a foot (ankle-roll link at `pos`, rotation
+/// `mat`, row-major) is over a pit: `support` more than `depth` above `raw`
+/// there. False without a heightfield.
+fn over_pit(
+    raw: Option<&crate::sim::HeightField>,
+    support: Option<&crate::sim::HeightField>,
+    pos: [f64; 3],
+    mat: &[f64; 9],
+    depth: f64,
+) -> bool {
+    let (Some(raw), Some(support)) = (raw, support) else {
+        return false;
+    };
+    crate::robot::SOLE_HEEL_TOE_X.iter().any(|&x| {
+        let (px, py) = (pos[0] + mat[0] * x, pos[1] + mat[3] * x);
+        support.height(px, py) - raw.height(px, py) > depth
+    })
+}
+
+/// Whether the terrain `raw` under the four corners of a foot's sole (ankle-roll
+/// link at `pos`, rotation `mat`) spans more than `step`. False without a
+/// heightfield.
+fn straddles(
+    raw: Option<&crate::sim::HeightField>,
+    pos: [f64; 3],
+    mat: &[f64; 9],
+    step: f64,
+) -> bool {
+    let Some(raw) = raw else { return false };
+    let w = crate::robot::SOLE_HALF_WIDTH;
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for x in crate::robot::SOLE_HEEL_TOE_X {
+        for y in [-w, w] {
+            let h = raw.height(
+                pos[0] + mat[0] * x + mat[1] * y,
+                pos[1] + mat[3] * x + mat[4] * y,
+            );
+            (lo, hi) = (lo.min(h), hi.max(h));
+        }
+    }
+    hi - lo > step
 }
 
 /// One curriculum move. Past the top level an env goes to a random level

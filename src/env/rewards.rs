@@ -49,6 +49,8 @@ terms! {
     hip_pos: "sum((q_hip - q_default - stance offset)^2) over hip roll and yaw (the offset: ref_stance_roll on hip roll, 0 by default)";
     feet_stumble: "1 if a foot's horizontal contact force exceeds 4 |F_z|";
     feet_edge: "number of feet in contact on a terrain edge, when terrain level >= feet_edge_min_level";
+    feet_gap: "number of feet in contact whose heel or toe is over a pit: the support surface (env.terrain.support_radius) more than feet_gap_depth above the terrain there; unlike feet_edge it sees the sole's ends, not the ankle, and applies at every level";
+    feet_straddle: "number of feet in contact across a step's edge: the terrain under the sole's four corners spans more than straddle_height (a foothold half on a block or a tread)";
     feet_parallel: "sum(pitch_foot^2), foot pitch in the world frame";
     huge_step: "|x_left_ankle - x_right_ankle| in the heading frame";
     feet_yaw: "sum(wrap(yaw_foot - yaw_base)^2)";
@@ -207,6 +209,18 @@ fn feet_edge(s: &EnvState, p: &RewardParams) -> f64 {
         .count() as f64
 }
 
+fn feet_gap(s: &EnvState, _: &RewardParams) -> f64 {
+    (0..2)
+        .filter(|&i| s.feet_contact[i] && s.feet_over_pit[i])
+        .count() as f64
+}
+
+fn feet_straddle(s: &EnvState, _: &RewardParams) -> f64 {
+    (0..2)
+        .filter(|&i| s.feet_contact[i] && s.feet_straddle[i])
+        .count() as f64
+}
+
 fn feet_parallel(s: &EnvState, _: &RewardParams) -> f64 {
     s.feet_rpy.iter().map(|r| sq(r[1])).sum()
 }
@@ -256,7 +270,7 @@ fn knee_foot(s: &EnvState, _: &RewardParams) -> f64 {
 fn foot_height(s: &EnvState, p: &RewardParams) -> f64 {
     (0..2)
         .filter(|&i| !s.feet_contact[i])
-        .map(|i| (s.feet_pos[i][2] - s.feet_ground[i]).min(p.foot_clearance_target))
+        .map(|i| (s.feet_pos[i][2] - s.feet_swing_ground[i]).min(p.foot_clearance_target))
         .sum()
 }
 
@@ -335,7 +349,7 @@ fn gait_contact(s: &EnvState, p: &RewardParams) -> f64 {
 fn feet_swing_height(s: &EnvState, p: &RewardParams) -> f64 {
     (0..2)
         .filter(|&k| !s.feet_contact[k])
-        .map(|k| sq(s.feet_pos[k][2] - s.feet_ground[k] - p.swing_height_target))
+        .map(|k| sq(s.feet_pos[k][2] - s.feet_swing_ground[k] - p.swing_height_target))
         .sum()
 }
 
@@ -402,7 +416,8 @@ fn foot_clearance(s: &EnvState, p: &RewardParams) -> f64 {
     let err: f64 = (0..2)
         .map(|k| {
             let speed = s.feet_vel[k][0].hypot(s.feet_vel[k][1]);
-            (2.0 * speed).tanh() * sq(s.feet_pos[k][2] - s.feet_ground[k] - p.foot_clearance_target)
+            (2.0 * speed).tanh()
+                * sq(s.feet_pos[k][2] - s.feet_swing_ground[k] - p.foot_clearance_target)
         })
         .sum();
     (-err / p.clearance_sigma).exp()
@@ -419,7 +434,7 @@ fn feet_swing_clock(s: &EnvState, p: &RewardParams) -> f64 {
     (0..2)
         .filter_map(|k| {
             swing_clock_target(s.gait_phase, k, p)
-                .map(|z| sq(s.feet_pos[k][2] - s.feet_ground[k] - z))
+                .map(|z| sq(s.feet_pos[k][2] - s.feet_swing_ground[k] - z))
         })
         .sum()
 }
@@ -570,6 +585,19 @@ pub struct RewardParams {
     pub foot_clearance_target: f64,
     /// Terrain level from which `feet_edge` applies (the paper's "level > 3").
     pub feet_edge_min_level: usize,
+    /// Depth (m) of the support surface above the terrain under a heel or toe
+    /// from which `feet_gap` counts the foot as over a pit.
+    pub feet_gap_depth: f64,
+    /// Height span (m) of the terrain under the sole's corners from which
+    /// `feet_straddle` counts the foot as across an edge.
+    pub straddle_height: f64,
+    /// How far ahead of a foot along the heading (m) the swing terms
+    /// (`foot_height`, `feet_swing_height`, `foot_clearance`,
+    /// `feet_swing_clock`) look for the ground they measure its height from:
+    /// the highest support surface within it, so that a foot swinging at a
+    /// raised block is asked to clear the block's top, not the floor it left
+    /// (0: the ground under the foot).
+    pub swing_lookahead: f64,
     /// Fraction of the gait period a leg is in stance (`gait_contact`).
     pub gait_stance_ratio: f64,
     /// Swing-foot height above the ground that `feet_swing_height` aims for (m).
@@ -606,6 +634,9 @@ impl Default for RewardParams {
             feet_distance_target: 0.22,
             foot_clearance_target: 0.08,
             feet_edge_min_level: 3,
+            feet_gap_depth: 0.02,
+            straddle_height: 0.02,
+            swing_lookahead: 0.0,
             gait_stance_ratio: 0.55,
             swing_height_target: 0.08,
             upright_sigma: 0.2,

@@ -46,6 +46,10 @@ pub struct EnvState {
     pub feet_rpy: [[f64; 3]; 2],
     /// Terrain height under each foot.
     pub feet_ground: [f64; 2],
+    /// The ground the swing terms measure a foot's height from: the highest
+    /// support surface from under the foot to `swing_lookahead` ahead of it
+    /// along the heading (`feet_ground` when the lookahead is 0).
+    pub feet_swing_ground: [f64; 2],
     /// Summed ground contact force on each foot, world frame.
     pub feet_force: [[f64; 3]; 2],
     pub feet_contact: [bool; 2],
@@ -58,6 +62,12 @@ pub struct EnvState {
     pub feet_first_contact: [bool; 2],
     /// Foot on a terrain edge.
     pub feet_on_edge: [bool; 2],
+    /// Heel or toe over a pit: the support surface more than
+    /// `feet_gap_depth` above the terrain there (`feet_gap`).
+    pub feet_over_pit: [bool; 2],
+    /// The terrain under the sole's four corners spans more than
+    /// `straddle_height`: the foot is across a step's edge (`feet_straddle`).
+    pub feet_straddle: [bool; 2],
     pub knees_pos: [[f64; 3]; 2],
     /// Feet linear velocity (world), from their positions one control step apart.
     pub feet_vel: [[f64; 3]; 2],
