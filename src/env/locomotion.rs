@@ -440,6 +440,11 @@ impl LocoEnv {
         }
         let xpos = d.xpos();
         let xmat = d.xmat();
+        let params = &sh.rewards.params;
+        let raw = scene.heights.as_deref();
+        // support samples ahead of each foot for the swing terms, along the heading
+        let ahead = (params.swing_lookahead / LOOKAHEAD_STEP).round() as usize;
+        let (cy, sy) = (s.yaw.cos(), s.yaw.sin());
         for f in 0..2 {
             let p = xpos[g1.feet[f]];
             for a in 0..3 {
@@ -448,9 +453,7 @@ impl LocoEnv {
             s.feet_pos[f] = p;
             s.feet_rpy[f] = rpy(&xmat[g1.feet[f]]);
             s.feet_ground[f] = ground(s.feet_pos[f][0], s.feet_pos[f][1]);
-            let ahead = sh.rewards.params.swing_lookahead;
-            let (cy, sy) = (s.yaw.cos(), s.yaw.sin());
-            s.feet_swing_ground[f] = (1..=(ahead / LOOKAHEAD_STEP).round() as usize)
+            s.feet_swing_ground[f] = (1..=ahead)
                 .map(|k| {
                     let d = k as f64 * LOOKAHEAD_STEP;
                     ground(s.feet_pos[f][0] + d * cy, s.feet_pos[f][1] + d * sy)
@@ -461,28 +464,16 @@ impl LocoEnv {
                     .terrain
                     .as_ref()
                     .is_some_and(|m| m.is_edge(s.feet_pos[f][0], s.feet_pos[f][1]));
-            s.feet_over_pit[f] = !on_plane
-                && over_pit(
-                    scene.heights.as_deref(),
-                    support,
-                    p,
-                    &xmat[g1.feet[f]],
-                    sh.rewards.params.feet_gap_depth,
-                );
-            s.feet_straddle[f] = !on_plane
-                && straddles(
-                    scene.heights.as_deref(),
-                    p,
-                    &xmat[g1.feet[f]],
-                    sh.rewards.params.straddle_height,
-                );
+            s.feet_over_pit[f] =
+                !on_plane && over_pit(raw, support, p, &xmat[g1.feet[f]], params.feet_gap_depth);
+            s.feet_straddle[f] =
+                !on_plane && straddles(raw, p, &xmat[g1.feet[f]], params.straddle_height);
             s.knees_pos[f] = xpos[g1.knees[f]];
         }
 
         // contacts with the ground: feet forces, collisions, fatal contacts
         let model = d.model();
         let geom_body = model.geom_bodyid();
-        let params = &sh.rewards.params;
         s.feet_force = [[0.0; 3]; 2];
         s.collisions = 0;
         let mut collided = [false; 64];
@@ -616,6 +607,15 @@ fn height_on(on_plane: bool, field: Option<&crate::sim::HeightField>, x: f64, y:
     }
 }
 
+/// World `(x, y)` of the point `(x, y, 0)` of a foot's ankle-roll link frame
+/// (origin `pos`, rotation `mat`, row-major).
+fn sole_point(pos: [f64; 3], mat: &[f64; 9], x: f64, y: f64) -> (f64, f64) {
+    (
+        pos[0] + mat[0] * x + mat[1] * y,
+        pos[1] + mat[3] * x + mat[4] * y,
+    )
+}
+
 /// Whether the heel or the toe of a foot (ankle-roll link at `pos`, rotation
 /// `mat`, row-major) is over a pit: `support` more than `depth` above `raw`
 /// there. False without a heightfield.
@@ -630,7 +630,7 @@ fn over_pit(
         return false;
     };
     crate::robot::SOLE_HEEL_TOE_X.iter().any(|&x| {
-        let (px, py) = (pos[0] + mat[0] * x, pos[1] + mat[3] * x);
+        let (px, py) = sole_point(pos, mat, x, 0.0);
         support.height(px, py) - raw.height(px, py) > depth
     })
 }
@@ -649,10 +649,8 @@ fn straddles(
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for x in crate::robot::SOLE_HEEL_TOE_X {
         for y in [-w, w] {
-            let h = raw.height(
-                pos[0] + mat[0] * x + mat[1] * y,
-                pos[1] + mat[3] * x + mat[4] * y,
-            );
+            let (px, py) = sole_point(pos, mat, x, y);
+            let h = raw.height(px, py);
             (lo, hi) = (lo.min(h), hi.max(h));
         }
     }
