@@ -182,6 +182,64 @@ fn eval_cli_sweeps_levels_into_a_json_and_a_plot() {
     }
 }
 
+/// `eval --set eval.KEY=VALUE` changes the evaluation protocol stored in the
+/// checkpoint, says so in the report, and refuses any other key or a bad value.
+#[test]
+fn eval_cli_set_changes_the_protocol_and_nothing_else() {
+    let dir = Scratch::new("eval-set");
+    // a 1 mm lane: every episode reaches the end line on its first step
+    let ck = tiny_checkpoint(&dir, &["eval.lane_length=0.001", "eval.n_envs=2"]);
+    let report = |sets: &[&str]| -> serde_json::Value {
+        let mut c = bin();
+        c.args(["eval", "--checkpoint"]).arg(&ck.path);
+        c.args([
+            "--terrain",
+            "uneven",
+            "--episodes",
+            "2",
+            "--threads",
+            "1",
+            "--json",
+        ]);
+        for s in sets {
+            c.args(["--set", s]);
+        }
+        let text = common::run_ok(&mut c);
+        serde_json::from_str(text.lines().last().unwrap()).unwrap()
+    };
+    let plain = report(&[]);
+    assert_eq!(plain["uneven_heights"], "isaac");
+    assert!(plain.get("eval_sets").is_none(), "{plain}");
+    assert_eq!(plain["success_rate"], 1.0);
+    let full = report(&["eval.terrain.uneven.heights=full"]);
+    assert_eq!(full["uneven_heights"], "full");
+    assert_eq!(
+        full["eval_sets"],
+        serde_json::json!(["eval.terrain.uneven.heights=full"])
+    );
+    // a 100 m lane and a 0.1 s limit: every episode times out
+    let long = report(&["eval.lane_length=100", "eval.time_limit_s=0.1"]);
+    assert_eq!(long["success_rate"], 0.0);
+    assert_eq!(long["timeouts"], 2);
+    let path = ck.path.to_str().unwrap();
+    for (set, want) in [
+        ("env.n_envs=3", "only eval.* keys"),
+        ("eval.terrain.uneven.heights=tall", "tall"),
+        ("eval.lane_length=-1", "lane_length"),
+    ] {
+        let e = stderr_of(&[
+            "eval",
+            "--checkpoint",
+            path,
+            "--terrain",
+            "uneven",
+            "--set",
+            set,
+        ]);
+        assert!(e.contains(want) && e.lines().count() <= 2, "{set}: {e}");
+    }
+}
+
 #[test]
 fn exported_torchscript_gives_the_checkpoints_actions() {
     export_matches(&[]);

@@ -505,13 +505,14 @@ fn uneven_blocks_have_heights_in_the_range() {
         for j in 0..t.ny {
             for i in t.ix(x0)..t.ix(x1) {
                 let h = t.h(i, j).abs();
-                let block = h >= 0.10 - c.tol() && h <= max_height + c.tol();
+                // `heights: isaac` (the default): h or h / 2, h >= 0.10
+                let block = h >= 0.05 - c.tol() && h <= max_height + c.tol();
                 assert!(
                     h <= c.tol() || block,
                     "level {}: |h| = {h} is neither ground nor a block",
                     c.level
                 );
-                raised += usize::from(h > 0.05);
+                raised += usize::from(h > 0.025);
                 total += 1;
             }
         }
@@ -564,6 +565,46 @@ fn uneven_width_lays_strips_across_the_walk() {
             steps += usize::from(i > 0 && (h0 - t.h(i - 1, 0)).abs() > 0.05);
         }
         assert!(steps >= 4, "level {level}: {steps} edges along x");
+    }
+}
+
+/// The paper's level 0 (`h` = 0.10 m): `heights: isaac` lays blocks of +-10
+/// and +-5 cm, Isaac Gym's `discrete_obstacles_terrain` choice, each of the
+/// four common; `full` lays +-10 cm blocks only.
+#[test]
+fn uneven_heights_are_isaac_gyms_choice_or_the_full_height() {
+    use dreampolicy::terrain::UnevenHeights;
+    for (heights, want) in [
+        (UnevenHeights::Isaac, vec![-100, -50, 50, 100]),
+        (UnevenHeights::Full, vec![-100, 100]),
+    ] {
+        let map = uneven_map(
+            1,
+            UnevenParams {
+                heights,
+                ..UnevenParams::default()
+            },
+            7,
+        );
+        let t = Tile::of(&map, 0, 0);
+        let mut seen = std::collections::BTreeMap::<i64, usize>::new();
+        for i in 0..t.nx {
+            for j in 0..t.ny {
+                let mm = (t.h(i, j) * 1000.0).round() as i64;
+                if mm != 0 {
+                    *seen.entry(mm).or_default() += 1;
+                }
+            }
+        }
+        let got: Vec<i64> = seen.keys().copied().collect();
+        assert_eq!(got, want, "{heights:?}: block heights (mm) {seen:?}");
+        let total: usize = seen.values().sum();
+        for (mm, n) in &seen {
+            assert!(
+                n * 4 * want.len() > total,
+                "{heights:?}: {mm} mm on {n} of {total} block samples"
+            );
+        }
     }
 }
 

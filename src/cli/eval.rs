@@ -64,6 +64,12 @@ pub struct EvalArgs {
     seed: u64,
     #[arg(long, default_value_t = 2)]
     threads: usize,
+    /// Change the evaluation protocol stored in each checkpoint's config
+    /// (`eval.*` keys only), e.g. `--set eval.terrain.uneven.heights=full`
+    /// (the uneven lanes as scored before 2026-12-04) or `--set
+    /// eval.time_limit_s=40` (repeatable).
+    #[arg(long = "set", value_name = "eval.KEY=VALUE")]
+    set: Vec<String>,
     /// Also write the JSON report (one evaluation) or matrix to this file.
     #[arg(long)]
     out: Option<PathBuf>,
@@ -131,8 +137,12 @@ pub fn run(a: EvalArgs) -> Result<()> {
     let cks = a
         .checkpoint
         .iter()
-        .map(|p| Checkpoint::read(p))
-        .collect::<Result<Vec<_>, _>>()?;
+        .map(|p| {
+            let mut ck = Checkpoint::read(p)?;
+            ck.set_eval(&a.set)?;
+            Ok(ck)
+        })
+        .collect::<Result<Vec<_>, dreampolicy::rl::RlError>>()?;
     let then = a
         .then
         .as_deref()

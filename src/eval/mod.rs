@@ -69,6 +69,12 @@ pub struct EvalReport {
     pub checkpoint_env_steps: u64,
     pub mujoco_version: String,
     pub seed: u64,
+    /// The uneven blocks' heights (`terrain.uneven.heights` of the lanes'
+    /// table) when the lanes hold uneven ground; None otherwise.
+    pub uneven_heights: Option<crate::terrain::UnevenHeights>,
+    /// `eval.*` overrides of the checkpoint's stored config (`eval --set`).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub eval_sets: Vec<String>,
 }
 
 /// Shorter flights of a foot (a contact lost for a step or two while it
@@ -225,6 +231,10 @@ pub fn evaluate_in(
         checkpoint_env_steps: ck.meta.env_steps,
         mujoco_version: crate::sim::mujoco_version(),
         seed: o.seed,
+        uneven_heights: [Some(o.terrain), o.then]
+            .contains(&Some(TerrainKind::Uneven))
+            .then_some(cfg.eval.terrain.uneven.heights),
+        eval_sets: ck.eval_sets().to_vec(),
     })
 }
 

@@ -106,6 +106,9 @@ pub struct Checkpoint {
     pub path: PathBuf,
     pub meta: CheckpointMeta,
     file: NamedTensors<CheckpointMeta>,
+    /// `eval.*` overrides that [`Checkpoint::config`] applies to the stored
+    /// config ([`Checkpoint::set_eval`]).
+    eval_sets: Vec<String>,
 }
 
 fn err(path: &Path, message: impl Into<String>) -> RlError {
@@ -168,7 +171,33 @@ impl Checkpoint {
             path: path.to_path_buf(),
             meta: file.meta.clone(),
             file,
+            eval_sets: Vec::new(),
         })
+    }
+
+    /// The `eval.*` overrides [`Checkpoint::set_eval`] added.
+    pub fn eval_sets(&self) -> &[String] {
+        &self.eval_sets
+    }
+
+    /// Change the stored config's evaluation protocol (`eval.*` keys only,
+    /// `key=value` as `--set` takes them, e.g.
+    /// `eval.terrain.uneven.heights=full`) for every later [`Checkpoint::config`].
+    /// Another key, or a value the config refuses, is an error and changes nothing.
+    pub fn set_eval(&mut self, sets: &[String]) -> Result<(), RlError> {
+        if let Some(bad) = sets.iter().find(|s| !s.starts_with("eval.")) {
+            return Err(RlError::Invalid(format!(
+                "--set {bad}: only eval.* keys (the evaluation protocol) can be changed here; \
+                 the policy and its training env are the checkpoint's"
+            )));
+        }
+        let all = [&self.eval_sets[..], sets].concat();
+        let old = std::mem::replace(&mut self.eval_sets, all);
+        if let Err(e) = self.config() {
+            self.eval_sets = old;
+            return Err(e);
+        }
+        Ok(())
     }
 
     /// The resolved config stored in the checkpoint.
@@ -189,6 +218,7 @@ impl Checkpoint {
             );
             overrides.push("env.sim.integrator=implicit".to_string());
         }
+        overrides.extend(self.eval_sets.iter().cloned());
         Ok(crate::rl::config::from_str(
             &self.meta.config,
             &label,

@@ -16,6 +16,23 @@ use super::{TerrainError, TerrainKind};
 #[serde(transparent)]
 pub struct Curriculum(pub [f64; 2]);
 
+/// Which offsets an uneven block takes from its drawn height `h`
+/// ([`UnevenParams::heights`]); the sign is `raised_fraction`'s either way.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum UnevenHeights {
+    /// `h` or `h / 2` with an even chance: Isaac Gym's
+    /// `discrete_obstacles_terrain` (`[-h, -h/2, h/2, h]`), the generator whose
+    /// parameters (max height, min and max size, rectangle count) the paper's
+    /// table gives. The paper's level 0 (`h` = 0.10 m) has 5 and 10 cm blocks.
+    #[default]
+    Isaac,
+    /// Every block `h` (this project's reading of the table before; the
+    /// paper's level 0 then has only 10 cm blocks and 20 cm steps between a
+    /// raised and a lowered one).
+    Full,
+}
+
 /// How tile parameters follow the difficulty ([`TerrainConfig::level_sampling`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -97,11 +114,15 @@ macro_rules! params {
 
 params!(
     /// Uneven ground (paper table): random rectangular blocks, each raised or
-    /// lowered (random sign) by its own height; each block draws its height and
-    /// both sides from the curriculum.
+    /// lowered (random sign); each block draws its height `h` and both sides
+    /// from the curriculum, and `heights` says which offsets `h` gives.
     UnevenParams {
-        /// Block height (m).
+        /// Block height `h` (m): the largest offset of a block.
         height: Curriculum = Curriculum([0.10, 0.20]),
+        /// The offsets a block takes from its `h`: `isaac` (Isaac Gym's
+        /// `discrete_obstacles_terrain`, which the paper's table parametrizes:
+        /// `h` or `h / 2`, an even chance) or `full` (every block `h`).
+        heights: UnevenHeights = UnevenHeights::Isaac,
         /// Block side (m), drawn separately along x and y.
         size: Curriculum = Curriculum([0.40, 0.70]),
         /// Block side across the walking direction (along y, m), a training

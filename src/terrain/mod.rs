@@ -28,7 +28,7 @@ use std::path::PathBuf;
 
 pub use config::{
     BridgeParams, Curriculum, GapParams, LevelSampling, SlopeBridgeParams, SlopeParams,
-    StairParams, TerrainConfig, UnevenParams, WaveParams,
+    StairParams, TerrainConfig, UnevenHeights, UnevenParams, WaveParams,
 };
 pub use kinds::{TerrainKind, COMBINED_PAIRS};
 pub use lane::{Lane, Segment};

@@ -14,7 +14,7 @@ use rand::Rng;
 use serde::Serialize;
 
 use super::canvas::{quantize, samples, Canvas, Region};
-use super::config::difficulty;
+use super::config::{difficulty, UnevenHeights};
 use super::{
     TerrainConfig, TerrainError, TerrainKind, END_CLEARANCE, SPAWN_CLEARANCE, SPAWN_OFFSET,
 };
@@ -229,7 +229,13 @@ fn uneven<R: Rng + ?Sized>(c: &mut Canvas, r: Region, ctx: &Ctx, rng: &mut R) ->
             rng.random::<f64>() < p.raised_fraction
         };
         let sign = if raised { 1.0 } else { -1.0 };
-        let h = sign * quantize(ctx.draw(&p.height, rng), vs);
+        let full = ctx.draw(&p.height, rng);
+        let h = match p.heights {
+            UnevenHeights::Full => full,
+            UnevenHeights::Isaac if rng.random::<bool>() => full / 2.0,
+            UnevenHeights::Isaac => full,
+        };
+        let h = sign * quantize(h, vs);
         c.fill(i..i + sx, j..j + sy, h);
     }
     TileParams::Uneven {
