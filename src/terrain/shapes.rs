@@ -222,19 +222,19 @@ fn uneven<R: Rng + ?Sized>(c: &mut Canvas, r: Region, ctx: &Ctx, rng: &mut R) ->
         let i = rng.random_range(r.i0..=r.i1 - sx);
         let j = rng.random_range(0..=c.ny - sy);
         // an even chance draws a bool, as before the parameter existed, so that
-        // the paper's lanes stay the ones every earlier eval scored
+        // with `heights: full` the paper's lanes stay the ones every eval
+        // before 2026-12-04 scored
         let raised = if p.raised_fraction == 0.5 {
             rng.random::<bool>()
         } else {
             rng.random::<f64>() < p.raised_fraction
         };
         let sign = if raised { 1.0 } else { -1.0 };
-        let full = ctx.draw(&p.height, rng);
-        let h = match p.heights {
-            UnevenHeights::Full => full,
-            UnevenHeights::Isaac if rng.random::<bool>() => full / 2.0,
-            UnevenHeights::Isaac => full,
-        };
+        let mut h = ctx.draw(&p.height, rng);
+        // Isaac Gym's choice: h or h / 2 (`full` draws nothing more)
+        if p.heights == UnevenHeights::Isaac && rng.random::<bool>() {
+            h /= 2.0;
+        }
         let h = sign * quantize(h, vs);
         c.fill(i..i + sx, j..j + sy, h);
     }
