@@ -209,6 +209,7 @@ fn eval_cli_set_changes_the_protocol_and_nothing_else() {
     };
     let plain = report(&[]);
     assert_eq!(plain["uneven_heights"], "isaac");
+    assert_eq!(plain["hfield_contacts"], "surface");
     assert!(plain.get("eval_sets").is_none(), "{plain}");
     assert_eq!(plain["success_rate"], 1.0);
     let full = report(&["eval.terrain.uneven.heights=full"]);
@@ -217,6 +218,8 @@ fn eval_cli_set_changes_the_protocol_and_nothing_else() {
         full["eval_sets"],
         serde_json::json!(["eval.terrain.uneven.heights=full"])
     );
+    let planes = report(&["eval.hfield_contacts=surface_planes"]);
+    assert_eq!(planes["hfield_contacts"], "surface_planes");
     // a 100 m lane and a 0.1 s limit: every episode times out
     let long = report(&["eval.lane_length=100", "eval.time_limit_s=0.1"]);
     assert_eq!(long["success_rate"], 0.0);
@@ -225,6 +228,7 @@ fn eval_cli_set_changes_the_protocol_and_nothing_else() {
     for (set, want) in [
         ("env.n_envs=3", "only eval.* keys"),
         ("eval.terrain.uneven.heights=tall", "tall"),
+        ("eval.hfield_contacts=boxes", "boxes"),
         ("eval.lane_length=-1", "lane_length"),
     ] {
         let e = stderr_of(&[

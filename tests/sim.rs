@@ -403,3 +403,68 @@ fn hfield_closing_fills_narrow_pits_only() {
     }
     assert_eq!(field.closed(0).height(0.3, 0.1), field.height(0.3, 0.1));
 }
+
+/// A foot of three parallel capsules (the G1's sole, 1 cm radius) resting on a
+/// 10 cm block's rim, its centre 3 cm inside, 6 cm of it over the drop; the
+/// block's vertical face is a one-cell ramp of the 5 cm grid. `user` picks the
+/// heightfield contacts (`sim::hfield_contact`). Returns the contacts' smallest
+/// normal z at rest and how far the foot moved (m) in 1 s.
+fn foot_on_a_rim(user: f64) -> (f64, f64) {
+    let dir = Scratch::new("hf-rim");
+    let xml = format!(
+        r#"<mujoco><asset><hfield name="t" nrow="21" ncol="41" size="1 0.5 0.2 0.1"/></asset>
+      <worldbody><geom name="ground" type="hfield" hfield="t" user="{user}"/>
+      <body name="foot" pos="-0.03 0 0.11"><freejoint/>
+        <geom type="capsule" size="0.01" fromto="-0.09 -0.03 0 0.09 -0.03 0" mass="0.4"/>
+        <geom type="capsule" size="0.01" fromto="-0.09 0 0 0.09 0 0" mass="0.4"/>
+        <geom type="capsule" size="0.01" fromto="-0.09 0.03 0 0.09 0.03 0" mass="0.4"/>
+      </body></worldbody></mujoco>"#
+    );
+    let mut model = Model::from_xml_str(&xml, &dir.0, "rim").unwrap();
+    // x <= 0 (columns 0..=20) is the block's top, 10 cm up; beyond, the floor
+    let data: Vec<f32> = (0..21 * 41)
+        .map(|i| if i % 41 <= 20 { 0.5 } else { 0.0 })
+        .collect();
+    model.set_hfield_data(0, &data).unwrap();
+    let mut d = Data::new(Arc::new(model)).unwrap();
+    d.forward();
+    let nz = d
+        .contacts()
+        .iter()
+        .map(|c| c.frame[2])
+        .fold(f64::INFINITY, f64::min);
+    assert!(!d.contacts().is_empty(), "no contact at rest");
+    let start = [d.qpos()[0], d.qpos()[1], d.qpos()[2]];
+    for _ in 0..500 {
+        d.step().unwrap();
+    }
+    let q = d.qpos();
+    let moved =
+        ((q[0] - start[0]).powi(2) + (q[1] - start[1]).powi(2) + (q[2] - start[2]).powi(2)).sqrt();
+    (nz, moved)
+}
+
+#[test]
+fn surface_contacts_hold_a_foot_on_a_rim() {
+    // the surface's closest points: every normal up, the foot stays
+    let (nz, moved) = foot_on_a_rim(1.0);
+    eprintln!("surface: min normal z {nz:.4}, moved {moved:.4} m");
+    assert!(nz > 0.999, "a contact normal tilted at the rim: n_z = {nz}");
+    assert!(
+        moved < 0.002,
+        "the foot moved {moved} m off a rim it rests on"
+    );
+    // the triangles' planes (before 2026-12-04): the ramp's plane, extended
+    // under the rim, gives a contact along the ramp's normal (63 degrees from
+    // the vertical) that shoves the foot off the block
+    let (nz, moved) = foot_on_a_rim(2.0);
+    eprintln!("surface_planes: min normal z {nz:.4}, moved {moved:.4} m");
+    assert!(
+        nz < 0.5,
+        "no tilted contact from the ramp's plane: n_z = {nz}"
+    );
+    assert!(
+        moved > 0.01,
+        "the ramp's contact left the foot in place ({moved} m)"
+    );
+}

@@ -78,10 +78,12 @@ pub struct SimConfig {
     /// Line-search iterations (`<option ls_iterations>`; MuJoCo's default 50).
     pub ls_iterations: usize,
     /// How robot spheres and capsules touch a heightfield terrain: `surface`
-    /// (the terrain's top surface only, contacts along the triangles' normals:
-    /// `sim::hfield_contact`) or `prisms` (MuJoCo's own prism-by-prism test,
-    /// whose internal side faces tilt contact normals: a G1 standing still on a
-    /// flat heightfield slides and falls).
+    /// (the terrain's top surface only, each contact at the surface's closest
+    /// point: `sim::hfield_contact`), `surface_planes` (its first version,
+    /// before 2026-12-04: contacts against the triangles' planes, extended,
+    /// which push a foot resting on a block's rim off it) or `prisms` (MuJoCo's
+    /// own prism-by-prism test, whose internal side faces tilt contact normals:
+    /// a G1 standing still on a flat heightfield slides and falls).
     pub hfield_contacts: HfieldContacts,
 }
 
@@ -90,6 +92,7 @@ pub struct SimConfig {
 #[serde(rename_all = "snake_case")]
 pub enum HfieldContacts {
     Surface,
+    SurfacePlanes,
     Prisms,
 }
 

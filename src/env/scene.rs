@@ -17,7 +17,7 @@ use rand_chacha::ChaCha8Rng;
 use super::EnvError;
 use crate::env::config::{EnvConfig, HfieldContacts, TerrainMode};
 use crate::robot::{self, G1};
-use crate::sim::hfield_contact::SURFACE_CONTACTS;
+use crate::sim::hfield_contact::{SURFACE_CONTACTS, SURFACE_PLANES};
 use crate::sim::{HeightField, Model, ObjType};
 use crate::terrain::{TerrainKind, TerrainMap};
 
@@ -189,6 +189,7 @@ pub fn scene_xml(cfg: &EnvConfig, terrain: Option<&TerrainMap>) -> String {
             // `user` = SURFACE_CONTACTS: our surface contacts (sim::hfield_contact)
             let user = match cfg.sim.hfield_contacts {
                 HfieldContacts::Surface => format!(r#" user="{}""#, SURFACE_CONTACTS),
+                HfieldContacts::SurfacePlanes => format!(r#" user="{}""#, SURFACE_PLANES),
                 HfieldContacts::Prisms => String::new(),
             };
             let (nrow, ncol) = map.hfield_shape();

@@ -72,6 +72,9 @@ pub struct EvalReport {
     /// The uneven blocks' heights (`terrain.uneven.heights` of the lanes'
     /// table) when the lanes hold uneven ground; None otherwise.
     pub uneven_heights: Option<crate::terrain::UnevenHeights>,
+    /// How the robot touched the lanes' heightfield (`env.sim.hfield_contacts`
+    /// of the eval scene) on non-flat lanes; None on the plane.
+    pub hfield_contacts: Option<crate::env::config::HfieldContacts>,
     /// `eval.*` overrides of the checkpoint's stored config (`eval --set`).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub eval_sets: Vec<String>,
@@ -146,7 +149,11 @@ pub fn eval_env_config(cfg: &ExperimentConfig, o: &EvalOptions) -> EnvConfig {
         env.sim.iterations = d.iterations;
         env.sim.ls_iterations = d.ls_iterations;
         env.sim.integrator = Integrator::Implicit;
+        env.sim.hfield_contacts = d.hfield_contacts;
         env.termination = Default::default();
+    }
+    if let Some(h) = e.hfield_contacts {
+        env.sim.hfield_contacts = h;
     }
     env.terrain.mode = if o.terrain == TerrainKind::Flat {
         TerrainMode::Plane
@@ -234,6 +241,7 @@ pub fn evaluate_in(
         uneven_heights: [Some(o.terrain), o.then]
             .contains(&Some(TerrainKind::Uneven))
             .then_some(cfg.eval.terrain.uneven.heights),
+        hfield_contacts: (o.terrain != TerrainKind::Flat).then_some(env_cfg.sim.hfield_contacts),
         eval_sets: ck.eval_sets().to_vec(),
     })
 }

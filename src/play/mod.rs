@@ -198,7 +198,11 @@ pub fn play_env_config(cfg: &ExperimentConfig, o: &PlayOptions, speed: f64) -> E
         env.sim.collision = CollisionMode::Full;
         (env.sim.iterations, env.sim.ls_iterations) = (d.iterations, d.ls_iterations);
         env.sim.integrator = Integrator::Implicit;
+        env.sim.hfield_contacts = d.hfield_contacts;
         env.termination = Default::default();
+    }
+    if let Some(h) = cfg.eval.hfield_contacts {
+        env.sim.hfield_contacts = h;
     }
     env.terrain.mode = match o.terrain {
         TerrainKind::Flat => TerrainMode::Plane,

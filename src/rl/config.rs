@@ -435,6 +435,11 @@ pub struct EvalConfig {
     /// default the paper's (whatever curriculum the policy trained on), so that
     /// every policy is measured on the same lanes.
     pub terrain: crate::terrain::TerrainConfig,
+    /// How the robot touches the lanes' heightfield: null = the scene's own
+    /// (`--full-collision`: the project's default, `surface`; otherwise the
+    /// checkpoint's `env.sim.hfield_contacts`); `surface_planes` gives the
+    /// contacts every heightfield figure before 2026-12-04 was measured with.
+    pub hfield_contacts: Option<crate::env::config::HfieldContacts>,
 }
 
 impl Default for EvalConfig {
@@ -447,6 +452,7 @@ impl Default for EvalConfig {
             n_envs: 20,
             lanes: 10,
             terrain: Default::default(),
+            hfield_contacts: None,
         }
     }
 }

@@ -25,16 +25,35 @@
 //! heightfield thus gets the two contacts it gets on a plane. A sphere is a
 //! capsule of zero length (one contact, under its centre).
 //!
+//! Where the surface bends, a contact against a triangle's plane is only right
+//! if the capsule is over that triangle. At a convex edge (a block's or a
+//! platform's rim, whose vertical face the grid turns into a one-cell ramp) a
+//! capsule lying on the top face at the rim is, by the ramp's plane extended
+//! back under it, 0.55 of its radius deep (a 10 cm step over a 5 cm cell, a
+//! 63-degree ramp): the first version of this module (kept as
+//! [`SURFACE_PLANES`]) gave that contact, deeper than the top face's own, along
+//! the ramp's normal, which shoves a foot resting on a rim off it, sideways and
+//! down (on a gap's 1 m pit, almost horizontally). [`SURFACE_CONTACTS`] takes
+//! at each run end the closest point of the surface itself (every triangle
+//! around the point): on a face it is the plane contact, at a rim it is the
+//! rim, along the direction from the rim to the capsule, and where two runs
+//! meet they give one contact, not two.
+//!
 //! The replacement is process-wide (MuJoCo has one table), so it applies to
 //! a heightfield geom only when the geom says so: its first `user` value is
-//! [`SURFACE_CONTACTS`] (the scene writes `user="1"` on the terrain geom).
-//! Any other heightfield is handed to MuJoCo's own function.
+//! [`SURFACE_CONTACTS`] or [`SURFACE_PLANES`] (the scene writes it on the
+//! terrain geom). Any other heightfield is handed to MuJoCo's own function.
 use std::sync::OnceLock;
 
 use mujoco_sys as sys;
 
-/// `geom_user[0]` of a heightfield geom that asks for surface contacts.
+/// `geom_user[0]` of a heightfield geom that asks for surface contacts: the
+/// closest point of the surface at each run end (the default).
 pub const SURFACE_CONTACTS: f64 = 1.0;
+/// `geom_user[0]` of a heightfield geom that asks for the first version's
+/// contacts: each run end against its own triangle's plane, extended (before
+/// 2026-12-04; see the module doc).
+pub const SURFACE_PLANES: f64 = 2.0;
 
 /// Most break points along one axis (ends, grid lines, diagonals). A longer
 /// capsule (over ~40 cells) goes to MuJoCo's function.
@@ -63,11 +82,22 @@ pub(super) fn install() {
     }
 }
 
-/// Whether heightfield geom `g` of `m` asks for surface contacts.
-fn wants_surface(m: &sys::mjModel, g: usize) -> bool {
+/// Which surface contacts heightfield geom `g` of `m` asks for: Some(true) the
+/// surface's closest points, Some(false) the triangles' planes, None MuJoCo's.
+fn wants_surface(m: &sys::mjModel, g: usize) -> Option<bool> {
     let n = m.nuser_geom;
+    if n <= 0 {
+        return None;
+    }
     // SAFETY: geom_user holds ngeom * nuser_geom values.
-    n > 0 && unsafe { *m.geom_user.add(g * n as usize) } == SURFACE_CONTACTS
+    let u = unsafe { *m.geom_user.add(g * n as usize) };
+    if u == SURFACE_CONTACTS {
+        Some(true)
+    } else if u == SURFACE_PLANES {
+        Some(false)
+    } else {
+        None
+    }
 }
 
 /// MuJoCo's collision-function signature: heightfield `g1`, sphere or capsule
@@ -87,10 +117,10 @@ unsafe extern "C" fn collide(
     // SAFETY: MuJoCo passes valid pointers for the duration of the call.
     let (mr, dr) = unsafe { (&*m, &*d) };
     let capsule = unsafe { *mr.geom_type.add(g2 as usize) } == sys::mjGEOM_CAPSULE as i32;
-    if wants_surface(mr, g1 as usize) {
+    if let Some(closest) = wants_surface(mr, g1 as usize) {
         // SAFETY: as above; con has room for mjMAXCONPAIR contacts.
         let out = unsafe { std::slice::from_raw_parts_mut(con, sys::mjMAXCONPAIR as usize) };
-        if let Some(n) = surface_contacts(mr, dr, out, g1 as usize, g2 as usize, margin) {
+        if let Some(n) = surface_contacts(mr, dr, out, g1 as usize, g2 as usize, margin, closest) {
             return n as i32;
         }
     }
@@ -147,6 +177,91 @@ impl Grid<'_> {
             sy,
         ])
     }
+
+    /// Vertex `(c, r)` in the heightfield's frame.
+    fn vertex(&self, c: usize, r: usize) -> [f64; 3] {
+        [
+            c as f64 * self.dx - self.size[0],
+            r as f64 * self.dy - self.size[1],
+            self.z(c, r),
+        ]
+    }
+
+    /// The closest point to `q` (heightfield frame) of the triangles of the
+    /// cells within `reach` cells of `q`'s cell, or None if there are none.
+    fn closest_point(&self, q: [f64; 3], reach: usize) -> Option<[f64; 3]> {
+        let gx = (q[0] + self.size[0]) / self.dx;
+        let gy = (q[1] + self.size[1]) / self.dy;
+        if !(gx >= 0.0 && gy >= 0.0) {
+            return None;
+        }
+        let (c, r) = (gx.floor() as usize, gy.floor() as usize);
+        let mut best: Option<([f64; 3], f64)> = None;
+        for rr in r.saturating_sub(reach)..=(r + reach).min(self.nrow.saturating_sub(2)) {
+            for cc in c.saturating_sub(reach)..=(c + reach).min(self.ncol.saturating_sub(2)) {
+                let (v00, v11) = (self.vertex(cc, rr), self.vertex(cc + 1, rr + 1));
+                for tri in [
+                    [v00, self.vertex(cc + 1, rr), v11],
+                    [v00, v11, self.vertex(cc, rr + 1)],
+                ] {
+                    let p = closest_on_triangle(q, &tri);
+                    let d = sub(q, p);
+                    let d2 = dot(d, d);
+                    if best.is_none_or(|(_, b)| d2 < b) {
+                        best = Some((p, d2));
+                    }
+                }
+            }
+        }
+        best.map(|(p, _)| p)
+    }
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn along(a: [f64; 3], d: [f64; 3], s: f64) -> [f64; 3] {
+    [a[0] + s * d[0], a[1] + s * d[1], a[2] + s * d[2]]
+}
+
+/// The point of triangle `t` closest to `p` (Ericson, Real-Time Collision
+/// Detection, 5.1.5: the Voronoi regions of the vertices, edges and face).
+fn closest_on_triangle(p: [f64; 3], t: &[[f64; 3]; 3]) -> [f64; 3] {
+    let [a, b, c] = *t;
+    let (ab, ac, ap) = (sub(b, a), sub(c, a), sub(p, a));
+    let (d1, d2) = (dot(ab, ap), dot(ac, ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return a;
+    }
+    let bp = sub(p, b);
+    let (d3, d4) = (dot(ab, bp), dot(ac, bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return b;
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        return along(a, ab, d1 / (d1 - d3));
+    }
+    let cp = sub(p, c);
+    let (d5, d6) = (dot(ab, cp), dot(ac, cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return c;
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        return along(a, ac, d2 / (d2 - d6));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 {
+        return along(b, sub(c, b), (d4 - d3) / ((d4 - d3) + (d5 - d6)));
+    }
+    let denom = 1.0 / (va + vb + vc);
+    along(along(a, ab, vb * denom), ac, vc * denom)
 }
 
 fn mat_t_vec(mat: &[f64; 9], v: [f64; 3]) -> [f64; 3] {
@@ -174,6 +289,7 @@ fn surface_contacts(
     g1: usize,
     g2: usize,
     margin: f64,
+    closest: bool,
 ) -> Option<usize> {
     // SAFETY: every read below is inside MuJoCo's arrays for valid ids g1, g2
     // (geom_* have ngeom entries, hfield_* nhfield, hfield_data nhfielddata).
@@ -258,19 +374,41 @@ fn surface_contacts(
     let breaks = &mut breaks[..nb];
     breaks.sort_unstable_by(f64::total_cmp);
 
-    // clearance of the capsule at axis parameter t to plane p, and the contact
+    // clearance of the capsule at axis parameter t to plane p
     let point = |t: f64| [a[0] + t * ab[0], a[1] + t * ab[1], a[2] + t * ab[2]];
-    let mut count = 0;
-    let mut emit = |t: f64, p: &[f64; 5], con: &mut [sys::mjContact]| {
+    let plane_contact = |t: f64, p: &[f64; 5]| {
         let [x0, y0, z0, sx, sy] = *p;
         let inv = 1.0 / (1.0 + sx * sx + sy * sy).sqrt();
         let n = [-sx * inv, -sy * inv, inv];
         let q = point(t);
         let dist = n[0] * (q[0] - x0) + n[1] * (q[1] - y0) + n[2] * (q[2] - z0) - radius;
+        (q, n, dist)
+    };
+    // cells around a point that can hold its closest surface point
+    let reach = ((radius + margin.max(0.0)) / grid.dx.min(grid.dy)).ceil() as usize + 1;
+    let reach = reach.min(4);
+    let mut count = 0;
+    let mut emit = |t: f64, p: &[f64; 5], con: &mut [sys::mjContact]| {
+        let (q, mut n, mut dist) = plane_contact(t, p);
         if dist >= margin || count >= con.len() {
             return;
         }
-        // midway between the capsule's lowest point and the plane
+        // the surface's own closest point, unless the axis is under the plane
+        // (deeper than the radius: the plane's direction is the way out)
+        if closest && dist + radius > 0.0 {
+            if let Some(c) = grid.closest_point(q, reach) {
+                let d = sub(q, c);
+                let len = dot(d, d).sqrt();
+                if len > 1e-12 {
+                    n = [d[0] / len, d[1] / len, d[2] / len];
+                    dist = len - radius;
+                    if dist >= margin {
+                        return;
+                    }
+                }
+            }
+        }
+        // midway between the capsule's lowest point and the surface
         let s = radius + 0.5 * dist;
         let pos = mat_vec(mat1, [q[0] - s * n[0], q[1] - s * n[1], q[2] - s * n[2]]);
         let c = &mut con[count];
@@ -291,6 +429,20 @@ fn surface_contacts(
     }
 
     // runs of pieces over coplanar triangles; a contact at each end of a run
+    // (with closest points, one where two runs meet: the same point of the
+    // surface, taken with the deeper of the two planes)
+    let mut ends = [(0.0f64, [0.0f64; 5]); 2 * MAX_BREAKS];
+    let mut ne = 0;
+    let mut push = |t: f64, p: [f64; 5]| {
+        if closest && ne > 0 && ends[ne - 1].0 == t {
+            if plane_contact(t, &p).2 < plane_contact(t, &ends[ne - 1].1).2 {
+                ends[ne - 1].1 = p;
+            }
+        } else {
+            ends[ne] = (t, p);
+            ne += 1;
+        }
+    };
     let mut run: Option<(f64, f64, [f64; 5])> = None;
     for w in breaks.windows(2) {
         let (t0, t1) = (w[0], w[1]);
@@ -307,16 +459,19 @@ fn surface_contacts(
             }
             _ => {
                 if let Some((s, e, p)) = run.take() {
-                    emit(s, &p, con);
-                    emit(e, &p, con);
+                    push(s, p);
+                    push(e, p);
                 }
                 run = here.map(|h| (t0, t1, h));
             }
         }
     }
     if let Some((s, e, p)) = run {
-        emit(s, &p, con);
-        emit(e, &p, con);
+        push(s, p);
+        push(e, p);
+    }
+    for (t, p) in &ends[..ne] {
+        emit(*t, p, con);
     }
     Some(count)
 }
