@@ -384,9 +384,10 @@ fn surface_contacts(
         let dist = n[0] * (q[0] - x0) + n[1] * (q[1] - y0) + n[2] * (q[2] - z0) - radius;
         (q, n, dist)
     };
-    // cells around a point that can hold its closest surface point
-    let reach = ((radius + margin.max(0.0)) / grid.dx.min(grid.dy)).ceil() as usize + 1;
-    let reach = reach.min(4);
+    // cells around a point that can hold a surface point within the contact
+    // distance (radius + margin): no farther one can give a contact
+    let reach = ((radius + margin.max(0.0)) / grid.dx.min(grid.dy)).ceil() as usize;
+    let reach = reach.clamp(1, 4);
     let mut count = 0;
     let mut emit = |t: f64, p: &[f64; 5], con: &mut [sys::mjContact]| {
         let (q, mut n, mut dist) = plane_contact(t, p);
