@@ -13,7 +13,7 @@ use serde::Serialize;
 pub mod sim2sim;
 
 use crate::env::config::{CollisionMode, EnvConfig, Integrator, TerrainMode};
-use crate::rl::config::ExperimentConfig;
+use crate::rl::config::{EvalConfig, ExperimentConfig};
 use std::sync::Arc;
 
 use crate::env::{Scene, VecEnv};
@@ -143,7 +143,23 @@ pub fn eval_env_config(cfg: &ExperimentConfig, o: &EvalOptions) -> EnvConfig {
     c.resample_time_s = e.time_limit_s * 2.0;
     c.min_norm = 0.0;
     c.lane_lookahead = o.lane_lookahead;
-    if o.full_collision {
+    scene_protocol(&mut env, o.full_collision, e);
+    env.terrain.mode = if o.terrain == TerrainKind::Flat {
+        TerrainMode::Plane
+    } else {
+        TerrainMode::Map
+    };
+    env.terrain.curriculum = false;
+    env.terrain.flat_on_plane = false;
+    env
+}
+
+/// The scene `eval` and `play` walk a lane in: with `full_collision` the
+/// project's default scene (every collision geom, MuJoCo's default solver, the
+/// implicit integrator, default terminations and heightfield contacts), then
+/// `eval.hfield_contacts` when the config names one.
+pub fn scene_protocol(env: &mut EnvConfig, full_collision: bool, e: &EvalConfig) {
+    if full_collision {
         let d = crate::env::config::SimConfig::default();
         env.sim.collision = CollisionMode::Full;
         env.sim.iterations = d.iterations;
@@ -155,14 +171,6 @@ pub fn eval_env_config(cfg: &ExperimentConfig, o: &EvalOptions) -> EnvConfig {
     if let Some(h) = e.hfield_contacts {
         env.sim.hfield_contacts = h;
     }
-    env.terrain.mode = if o.terrain == TerrainKind::Flat {
-        TerrainMode::Plane
-    } else {
-        TerrainMode::Map
-    };
-    env.terrain.curriculum = false;
-    env.terrain.flat_on_plane = false;
-    env
 }
 
 /// Evaluate the checkpoint's policy on `o.episodes` lanes: flat lanes are the

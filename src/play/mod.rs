@@ -32,7 +32,7 @@ use std::sync::Arc;
 
 use serde::Serialize;
 
-use crate::env::config::{CollisionMode, EnvConfig, Integrator, SimConfig, TerrainMode};
+use crate::env::config::{EnvConfig, TerrainMode};
 use crate::env::{EnvError, Scene, VecEnv};
 use crate::rl::checkpoint::Checkpoint;
 use crate::rl::config::ExperimentConfig;
@@ -193,17 +193,7 @@ pub fn play_env_config(cfg: &ExperimentConfig, o: &PlayOptions, speed: f64) -> E
     c.resample_time_s = 2.0 * env.episode_length_s;
     c.min_norm = 0.0;
     c.lane_lookahead = o.lane_lookahead;
-    if o.full_collision {
-        let d = SimConfig::default();
-        env.sim.collision = CollisionMode::Full;
-        (env.sim.iterations, env.sim.ls_iterations) = (d.iterations, d.ls_iterations);
-        env.sim.integrator = Integrator::Implicit;
-        env.sim.hfield_contacts = d.hfield_contacts;
-        env.termination = Default::default();
-    }
-    if let Some(h) = cfg.eval.hfield_contacts {
-        env.sim.hfield_contacts = h;
-    }
+    crate::eval::scene_protocol(&mut env, o.full_collision, &cfg.eval);
     env.terrain.mode = match o.terrain {
         TerrainKind::Flat => TerrainMode::Plane,
         _ => TerrainMode::Map,

@@ -160,7 +160,7 @@ impl Grid<'_> {
             return None;
         }
         let (u, v) = (gx - c as f64, gy - r as f64);
-        let h00 = self.z(c, r);
+        let [x0, y0, h00] = self.vertex(c, r);
         let h11 = self.z(c + 1, r + 1);
         let (sx, sy) = if u >= v {
             let h10 = self.z(c + 1, r);
@@ -169,13 +169,12 @@ impl Grid<'_> {
             let h01 = self.z(c, r + 1);
             ((h11 - h01) / self.dx, (h01 - h00) / self.dy)
         };
-        Some([
-            c as f64 * self.dx - self.size[0],
-            r as f64 * self.dy - self.size[1],
-            h00,
-            sx,
-            sy,
-        ])
+        Some([x0, y0, h00, sx, sy])
+    }
+
+    /// Point `(x, y)` of the heightfield's frame in grid units.
+    fn to_grid(&self, x: f64, y: f64) -> [f64; 2] {
+        [(x + self.size[0]) / self.dx, (y + self.size[1]) / self.dy]
     }
 
     /// Vertex `(c, r)` in the heightfield's frame.
@@ -190,8 +189,7 @@ impl Grid<'_> {
     /// The closest point to `q` (heightfield frame) of the triangles of the
     /// cells within `reach` cells of `q`'s cell, or None if there are none.
     fn closest_point(&self, q: [f64; 3], reach: usize) -> Option<[f64; 3]> {
-        let gx = (q[0] + self.size[0]) / self.dx;
-        let gy = (q[1] + self.size[1]) / self.dy;
+        let [gx, gy] = self.to_grid(q[0], q[1]);
         if !(gx >= 0.0 && gy >= 0.0) {
             return None;
         }
@@ -341,10 +339,7 @@ fn surface_contacts(
     }
 
     // grid coordinates along the axis: g(t) = ga + t * gd, t in [0, 1]
-    let ga = [
-        (a[0] + grid.size[0]) / grid.dx,
-        (a[1] + grid.size[1]) / grid.dy,
-    ];
+    let ga = grid.to_grid(a[0], a[1]);
     let gd = [ab[0] / grid.dx, ab[1] / grid.dy];
 
     // break points: the ends, and where the projection crosses x or y grid
