@@ -25,19 +25,14 @@ scripts/setup.sh makes (third_party/pyenv).
 import argparse
 import json
 import math
-import os
-import pathlib
 import sys
-
-ROOT = pathlib.Path(__file__).resolve().parent.parent
-VENV_PYTHON = ROOT / "third_party" / "pyenv" / "bin" / "python"
 
 try:
     from mcap.reader import make_reader
 except ImportError:
-    if VENV_PYTHON.is_file() and not os.environ.get("DREAMPOLICY_IN_PYENV"):
-        os.environ["DREAMPOLICY_IN_PYENV"] = "1"
-        os.execv(str(VENV_PYTHON), [str(VENV_PYTHON), __file__, *sys.argv[1:]])
+    from _venv import reexec_in_venv
+
+    reexec_in_venv(__file__)
     raise SystemExit("the mcap Python package is not installed: run scripts/setup.sh")
 
 SOLE_X = (-0.05, 0.13)
