@@ -126,6 +126,12 @@ fn specialist_terms_by_hand() {
     close(term("feet_straddle", &s), 1.0);
     s.feet_contact = [false, true];
     close(term("feet_straddle", &s), 0.0);
+    // a flight: neither foot on the ground
+    close(term("feet_flight", &s), 0.0);
+    s.feet_contact = [false, false];
+    close(term("feet_flight", &s), 1.0);
+    s.feet_contact = [true, true];
+    close(term("feet_flight", &s), 0.0);
     s.reached_goal = true;
     close(term("goal", &s), 1.0);
     s.terminated = true;

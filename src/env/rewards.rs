@@ -51,6 +51,7 @@ terms! {
     feet_edge: "number of feet in contact on a terrain edge, when terrain level >= feet_edge_min_level";
     feet_gap: "number of feet in contact whose heel or toe is over a pit: the support surface (env.terrain.support_radius) more than feet_gap_depth above the terrain there; unlike feet_edge it sees the sole's ends, not the ankle, and applies at every level";
     feet_straddle: "number of feet in contact across a step's edge: the terrain under the sole's four corners spans more than straddle_height (a foothold half on a block or a tread)";
+    feet_flight: "1 while neither foot touches the ground (a hop: the uneven specialist's falls begin with recovery hops that turn it; a walk has no flight phase)";
     feet_parallel: "sum(pitch_foot^2), foot pitch in the world frame";
     huge_step: "|x_left_ankle - x_right_ankle| in the heading frame";
     feet_yaw: "sum(wrap(yaw_foot - yaw_base)^2)";
@@ -219,6 +220,10 @@ fn feet_straddle(s: &EnvState, _: &RewardParams) -> f64 {
     (0..2)
         .filter(|&i| s.feet_contact[i] && s.feet_straddle[i])
         .count() as f64
+}
+
+fn feet_flight(s: &EnvState, _: &RewardParams) -> f64 {
+    (!s.feet_contact[0] && !s.feet_contact[1]) as u8 as f64
 }
 
 fn feet_parallel(s: &EnvState, _: &RewardParams) -> f64 {
