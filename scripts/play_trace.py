@@ -6,9 +6,10 @@ where each foot landed against the lane's terrain, flights, and the heading.
 
 Prints a summary (steps, distance, touchdowns, touchdowns across an edge,
 flight steps and the longest flight, the largest heading error; the same over
-the last 2 s, which for a fall are the 2 s before it: `play` prints the ending), and with `--steps A:B` one line per control step from A to B:
-time, yaw, pitch, roll, contacts (left, right), then for each foot its ankle
-position and the terrain under the sole's heel, ankle and toe.
+the last 2 s, which for a fall are the 2 s before it: `play` prints the
+ending), and with `--steps A:B` (not with `--json`) one line per control step
+from A to B: time, yaw, pitch, roll, contacts (left, right), then for each
+foot its ankle position and the terrain under the sole's heel, ankle and toe.
 
 The terrain is the lane's triangle mesh on `/terrain` (a plane lane has none:
 height 0), read as the heightfield's triangles (split along (c, r)-(c+1, r+1));
@@ -163,7 +164,7 @@ def main():
     out = {"file": a.file, "seconds": round(last["time"], 2), "distance": round(last["distance"], 3)}
     out.update(summarize(states, feet, terrain, 0, a.straddle_height))
     out["last_2s"] = summarize(states, feet, terrain, max(0, len(states) - 101), a.straddle_height)
-    if a.steps:
+    if a.steps and not a.json:
         lo, hi = (int(v) if v else None for v in a.steps.split(":"))
         for i in range(len(states))[slice(lo, hi)]:
             s = states[i]
@@ -175,8 +176,7 @@ def main():
                 t, q = feet[i][k]
                 hs = " ".join(f"{sole(terrain, t, q, x, 0.0):+.3f}" for x in (SOLE_X[0], 0.0, SOLE_X[1]))
                 line += f" | {side} ({t['x']:.2f}, {t['y']:.2f}, {t['z']:.3f}) ground {hs}"
-            if not a.json:
-                print(line)
+            print(line)
     print(json.dumps(out, indent=None if a.json else 1))
 
 
