@@ -208,6 +208,13 @@ impl<M: DeserializeOwned> NamedTensors<M> {
 }
 
 impl<M> NamedTensors<M> {
+    /// Every tensor's name (the `meta` record's included), sorted.
+    pub fn names(&self) -> Vec<&str> {
+        let mut v: Vec<&str> = self.tensors.keys().map(String::as_str).collect();
+        v.sort_unstable();
+        v
+    }
+
     /// The tensor `name`, or an error naming the file and the tensor.
     pub fn tensor(&self, name: &str) -> Result<&Tensor, CheckpointFileError> {
         self.tensors

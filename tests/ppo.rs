@@ -470,3 +470,74 @@ fn walker_transfers_into_a_scan_encoder_policy_acting_the_same() {
         "{e}"
     );
 }
+
+/// `checkpoint average`: the networks and normalizers of two kept checkpoints
+/// of one run are averaged element-wise; Adam's moments and the record are the
+/// last file's, which names both; a file of another network layout is refused.
+#[test]
+fn averaged_checkpoint_holds_the_mean_of_the_networks() {
+    use dreampolicy::checkpoint::NamedTensors;
+    use dreampolicy::rl::checkpoint::{average, CheckpointMeta};
+    let _t = torch_lock();
+    let dir = Scratch::new("average");
+    let cfg = load_config(
+        "test/cartpole.yaml",
+        &[
+            "train.iterations=10",
+            "train.save_interval=5",
+            "train.keep_interval=5",
+        ],
+    );
+    runner::train(&cfg, &dir.0, false, true).unwrap();
+    let a = dir.0.join("checkpoints/iter_000005.pt");
+    let b = dir.0.join("checkpoints/iter_000010.pt");
+    let out = dir.0.join("mean.pt");
+    let meta = average(&[a.clone(), b.clone()], &out).unwrap();
+    assert_eq!(meta.iteration, 10);
+    let read = |p: &std::path::Path| NamedTensors::<CheckpointMeta>::read(p).unwrap();
+    let (fa, fb, fm) = (read(&a), read(&b), read(&out));
+    assert_eq!(
+        fm.meta.averaged_from,
+        [a.display().to_string(), b.display().to_string()]
+    );
+    assert_eq!(fm.names(), fb.names());
+    let mut policy_tensors = 0;
+    for name in fm.names().into_iter().filter(|n| *n != "meta") {
+        let (ta, tb, tm) = (
+            fa.tensor(name).unwrap(),
+            fb.tensor(name).unwrap(),
+            fm.tensor(name).unwrap(),
+        );
+        let expect = if name.starts_with("policy.") || name.starts_with("norm.") {
+            policy_tensors += 1;
+            // the two checkpoints are 5 updates apart: their weights differ
+            if name.starts_with("policy.") {
+                assert!(ta != tb, "{name} did not change in 5 iterations");
+            }
+            (ta.to_kind(tch::Kind::Double) + tb.to_kind(tch::Kind::Double)) / 2.0
+        } else {
+            tb.to_kind(tch::Kind::Double)
+        };
+        let diff = (tm.to_kind(tch::Kind::Double) - expect)
+            .abs()
+            .max()
+            .double_value(&[]);
+        assert!(diff < 1e-6, "{name}: off by {diff}");
+    }
+    assert!(policy_tensors >= 6, "{policy_tensors} averaged tensors");
+    // the result reads as a checkpoint of the run
+    assert_eq!(
+        Checkpoint::read(&out).unwrap().meta.env_steps,
+        meta.env_steps
+    );
+    // another layout is refused, naming the file
+    let g1 = Scratch::new("average_g1");
+    let g1_cfg = load_config("test/g1_tiny.yaml", &["train.iterations=1"]);
+    runner::train(&g1_cfg, &g1.0, false, true).unwrap();
+    let other = latest_checkpoint(&g1.0);
+    let e = average(&[a, other.clone()], &g1.0.join("bad.pt"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("network layout"), "{e}");
+    assert!(!g1.0.join("bad.pt").exists());
+}

@@ -1,4 +1,4 @@
-//! `dreampolicy checkpoint verify|seal`: the integrity seals of the files a
+//! `dreampolicy checkpoint verify|seal|average`: the integrity seals of the files a
 //! later run trusts. By kind: a checkpoint (`*.pt`: a SHA-256 in the archive's
 //! zip comment, `dreampolicy::checkpoint`), a run's `config.yaml` (a seal line,
 //! `dreampolicy::seal`), a dataset's `stats.json` (a `"sha256"` first key), an
@@ -24,6 +24,18 @@ pub enum CheckpointCommand {
     /// their bytes are the ones that were saved. A sealed checkpoint is refused.
     Seal {
         #[arg(required = true)]
+        files: Vec<PathBuf>,
+    },
+    /// Write the mean of PPO checkpoints of one network layout (weights and
+    /// observation normalizers, element-wise; stochastic weight averaging).
+    /// The record, optimizer state and env state are the last file's, so the
+    /// result evaluates, plays and resumes like it; its `averaged_from` (and
+    /// every eval report of it) names the files.
+    Average {
+        /// The file to write (a sealed checkpoint).
+        #[arg(long)]
+        out: PathBuf,
+        #[arg(required = true, num_args = 2..)]
         files: Vec<PathBuf>,
     },
 }
@@ -116,6 +128,20 @@ pub fn run(which: CheckpointCommand) -> Result<()> {
                     bad.join(", ")
                 );
             }
+            Ok(())
+        }
+        CheckpointCommand::Average { out, files } => {
+            if files.contains(&out) {
+                bail!("--out {} is one of the files to average", out.display());
+            }
+            let meta = dreampolicy::rl::checkpoint::average(&files, &out)?;
+            println!(
+                "wrote {}: the mean of {} checkpoints (record of iteration {}, {} env-steps)",
+                out.display(),
+                files.len(),
+                meta.iteration,
+                meta.env_steps
+            );
             Ok(())
         }
         CheckpointCommand::Seal { files } => {

@@ -67,6 +67,10 @@ pub struct EvalReport {
     pub checkpoint: String,
     pub checkpoint_iteration: usize,
     pub checkpoint_env_steps: u64,
+    /// The checkpoints whose mean the evaluated one holds (`dreampolicy
+    /// checkpoint average`); empty (and left out) for a checkpoint a run saved.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub checkpoint_averaged_from: Vec<String>,
     pub mujoco_version: String,
     pub seed: u64,
     /// The uneven blocks' heights (`terrain.uneven.heights` of the lanes'
@@ -244,6 +248,7 @@ pub fn evaluate_in(
         checkpoint: ck.path.display().to_string(),
         checkpoint_iteration: ck.meta.iteration,
         checkpoint_env_steps: ck.meta.env_steps,
+        checkpoint_averaged_from: ck.meta.averaged_from.clone(),
         mujoco_version: crate::sim::mujoco_version(),
         seed: o.seed,
         uneven_heights: [Some(o.terrain), o.then]

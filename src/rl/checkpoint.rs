@@ -42,6 +42,10 @@ pub struct CheckpointMeta {
     pub episode_window: (Vec<f64>, Vec<f64>),
     /// Penalty-curriculum scale at save time.
     pub penalty_scale: f64,
+    /// The files whose networks and normalizers this checkpoint holds the
+    /// mean of ([`average`]); empty for a checkpoint a run saved.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub averaged_from: Vec<String>,
 }
 
 impl CheckpointMeta {
@@ -75,6 +79,7 @@ impl CheckpointMeta {
             mean_return: mean.filter(|r| r.is_finite()),
             episode_window,
             penalty_scale: task.penalty_scale(),
+            averaged_from: Vec::new(),
         })
     }
 }
@@ -148,6 +153,82 @@ pub fn save(
     ));
     named.push(("norm.scan".into(), f64_tensor(&agent.scan_norm.to_vec())));
     Ok(save_named(path, named, meta)?)
+}
+
+/// Tensors [`average`] takes the mean of: the networks and the observation
+/// normalizers. The rest (Adam's moments, the task's own state) and the JSON
+/// record come from the last file.
+fn averaged(name: &str) -> bool {
+    name.starts_with("policy.") || name.starts_with("norm.")
+}
+
+/// Write to `out` the checkpoint whose policy weights and normalizer
+/// statistics are the element-wise mean of `paths`' (stochastic weight
+/// averaging over checkpoints of one run): kept checkpoints a few hundred
+/// iterations apart differ in what they score on the same lanes, and their
+/// mean sits between them. The files must hold the same tensors with the same
+/// shapes (one network layout); the record, Adam's moments and the task state
+/// are the last file's, so the result evaluates, plays and resumes like it,
+/// with `averaged_from` naming the files.
+pub fn average(paths: &[PathBuf], out: &Path) -> Result<CheckpointMeta, RlError> {
+    let Some(last) = paths.last() else {
+        return Err(RlError::Invalid("average: no checkpoint given".into()));
+    };
+    let files = paths
+        .iter()
+        .map(|p| NamedTensors::<CheckpointMeta>::read(p))
+        .collect::<Result<Vec<_>, _>>()?;
+    let base = &files[files.len() - 1];
+    let names = base.names();
+    for f in &files {
+        if f.meta.format != FORMAT {
+            return Err(err(
+                &f.path,
+                format!("format {} (this build reads {FORMAT})", f.meta.format),
+            ));
+        }
+        if f.names() != names {
+            return Err(err(
+                &f.path,
+                format!(
+                    "holds other tensors than {}: not the same network layout",
+                    last.display()
+                ),
+            ));
+        }
+    }
+    let mut named = Vec::new();
+    for name in names.into_iter().filter(|n| *n != "meta") {
+        let t = base.tensor(name)?;
+        if !averaged(name) {
+            named.push((name.to_string(), t.shallow_clone()));
+            continue;
+        }
+        let mut sum = t.to_kind(Kind::Double);
+        for f in &files[..files.len() - 1] {
+            let u = f.tensor(name)?;
+            if u.size() != t.size() {
+                return Err(err(
+                    &f.path,
+                    format!(
+                        "tensor '{name}' has shape {:?}, {} has {:?}",
+                        u.size(),
+                        last.display(),
+                        t.size()
+                    ),
+                ));
+            }
+            sum += u.to_kind(Kind::Double);
+        }
+        named.push((
+            name.to_string(),
+            (sum / files.len() as f64).to_kind(t.kind()),
+        ));
+    }
+    let mut meta = base.meta.clone();
+    meta.averaged_from = paths.iter().map(|p| p.display().to_string()).collect();
+    save_named(out, named, &meta)?;
+    Ok(meta)
 }
 
 /// Write a controller checkpoint: `meta` (its config says how to act) and no
