@@ -61,6 +61,11 @@ pub struct SpecialistSource {
     pub terrain: String,
     /// Its checkpoint (`models/checkpoints/<terrain>/checkpoints/latest.pt`).
     pub checkpoint: String,
+    /// This specialist's `max_level` (levels `0..=max_level` of its training
+    /// map), instead of the config's: each specialist's curriculum topped out
+    /// at its own level.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_level: Option<usize>,
 }
 
 /// `configs/collect/*.yaml`.
@@ -301,7 +306,8 @@ pub fn collect(
                     source,
                 })?;
             }
-            let s = collect_shard(cfg, ck, kind, shard, round, dir, &info, quiet)?;
+            let max_level = spec.max_level.or(cfg.max_level);
+            let s = collect_shard(cfg, ck, (kind, max_level), shard, round, dir, &info, quiet)?;
             shards.push(s);
         }
     }
@@ -347,7 +353,7 @@ pub fn collect(
 fn collect_shard(
     cfg: &CollectConfig,
     ck: &Checkpoint,
-    kind: TerrainKind,
+    (kind, max_level): (TerrainKind, Option<usize>),
     shard: u32,
     round: usize,
     dir: &Path,
@@ -371,7 +377,7 @@ fn collect_shard(
     env_cfg.terrain.curriculum = false;
     if env_cfg.terrain.mode == TerrainMode::Map {
         let top = env_cfg.terrain.map.max_level();
-        env_cfg.terrain.init_max_level = cfg.max_level.map_or(top, |m| m.min(top));
+        env_cfg.terrain.init_max_level = max_level.map_or(top, |m| m.min(top));
         let kinds = &env_cfg.terrain.map.kinds;
         if !kinds.iter().any(|(k, w)| *k == kind && *w > 0.0) {
             return Err(CollectError::Invalid(format!(

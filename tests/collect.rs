@@ -162,3 +162,52 @@ fn collect_refuses_mismatched_specialists_and_bad_configs() {
         .to_string();
     assert!(e.contains("/nonexistent/x.pt"), "{e}");
 }
+
+/// A specialist's own `max_level` overrides the config's: its envs start on
+/// levels `0..=max_level` of its training map only. Row `l` of the map holds
+/// level `l` along x, so every episode's first pelvis x lies in one row with
+/// `max_level: 0` and spreads over rows with the config's `max_level: 2`.
+#[test]
+fn collect_starts_each_specialist_at_its_own_levels() {
+    let dir = Scratch::new("collect-levels");
+    let tile = 8.0;
+    let tile_set = format!("env.terrain.map.tile_length={tile}");
+    let uneven = tiny_policy(
+        &dir,
+        "uneven",
+        &[
+            "env.terrain.mode=map",
+            "env.terrain.map.num_levels=3",
+            "env.terrain.map.num_cols=2",
+            &tile_set,
+            "env.terrain.map.kinds={uneven: 1.0}",
+        ],
+    );
+    let spread = |own: &str, name: &str| {
+        let text = format!(
+            "specialists:\n  - {{terrain: uneven, checkpoint: {}{own}}}\n\
+             n_envs: 8\nepisodes_per_env: 1\nrounds: 1\nepisode_length_s: 0.1\nthreads: 1\nmax_level: 2\n",
+            uneven.display()
+        );
+        let out = dir.0.join(name);
+        collect(&config(&text), &text, &out, true).unwrap();
+        let xs: Vec<f64> = Dataset::open(&out, Default::default())
+            .unwrap()
+            .frames()
+            .map(|f| f.unwrap().1)
+            .filter(|f| f.step == 0)
+            .map(|f| f.pos[0])
+            .collect();
+        assert_eq!(xs.len(), 8);
+        let lo = xs.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = xs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        hi - lo
+    };
+    let own = spread(", max_level: 0", "own");
+    let config_wide = spread("", "config");
+    assert!(own < 0.5 * tile, "level 0 only: x spread {own} m");
+    assert!(
+        config_wide > 0.9 * tile,
+        "levels 0-2: x spread {config_wide} m"
+    );
+}
