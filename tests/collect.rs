@@ -19,6 +19,18 @@ fn tiny_policy(dir: &Scratch, name: &str, sets: &[&str]) -> std::path::PathBuf {
         .checkpoint
 }
 
+/// The tiny policy trained on a 3-level, 2-column map of uneven tiles.
+fn tiny_uneven_policy(dir: &Scratch, extra: &[&str]) -> std::path::PathBuf {
+    let mut sets = vec![
+        "env.terrain.mode=map",
+        "env.terrain.map.num_levels=3",
+        "env.terrain.map.num_cols=2",
+        "env.terrain.map.kinds={uneven: 1.0}",
+    ];
+    sets.extend_from_slice(extra);
+    tiny_policy(dir, "uneven", &sets)
+}
+
 fn config(text: &str) -> CollectConfig {
     CollectConfig::from_str(text, "test", &[]).unwrap()
 }
@@ -27,16 +39,7 @@ fn config(text: &str) -> CollectConfig {
 fn collect_writes_whole_episodes_with_ids_flags_and_metadata() {
     let dir = Scratch::new("collect");
     let flat = tiny_policy(&dir, "flat", &[]);
-    let uneven = tiny_policy(
-        &dir,
-        "uneven",
-        &[
-            "env.terrain.mode=map",
-            "env.terrain.map.num_levels=3",
-            "env.terrain.map.num_cols=2",
-            "env.terrain.map.kinds={uneven: 1.0}",
-        ],
-    );
+    let uneven = tiny_uneven_policy(&dir, &[]);
     let text = format!(
         "specialists:\n  - {{terrain: flat, checkpoint: {}}}\n  - {{terrain: uneven, checkpoint: {}}}\n\
          n_envs: 3\nepisodes_per_env: 2\nrounds: 2\nepisode_length_s: 0.3\nthreads: 1\n",
@@ -172,17 +175,7 @@ fn collect_starts_each_specialist_at_its_own_levels() {
     let dir = Scratch::new("collect-levels");
     let tile = 8.0;
     let tile_set = format!("env.terrain.map.tile_length={tile}");
-    let uneven = tiny_policy(
-        &dir,
-        "uneven",
-        &[
-            "env.terrain.mode=map",
-            "env.terrain.map.num_levels=3",
-            "env.terrain.map.num_cols=2",
-            &tile_set,
-            "env.terrain.map.kinds={uneven: 1.0}",
-        ],
-    );
+    let uneven = tiny_uneven_policy(&dir, &[&tile_set]);
     let spread = |own: &str, name: &str| {
         let text = format!(
             "specialists:\n  - {{terrain: uneven, checkpoint: {}{own}}}\n\
