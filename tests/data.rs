@@ -947,3 +947,73 @@ fn damaged_shards_are_refused_or_read_to_their_last_good_chunk() {
     assert_eq!(refused + prefix + intact, 60);
     assert!(refused > 0 && prefix > 0);
 }
+
+/// `interleaved_windows_of` reads the shards side by side: the same windows as
+/// the in-order stream (with a split and a kinds filter too), but every stretch
+/// of it holds every shard in proportion, while the first quarter of the
+/// in-order stream is shard 0 alone; the order is fixed by the seed.
+#[test]
+fn interleaved_windows_mix_the_shards_and_keep_every_window() {
+    let dir = tempfile::tempdir().unwrap();
+    for shard in 0..4u32 {
+        let frames = synth(shard, 4, 60, Dims::G1, &lens);
+        write_shard(dir.path(), shard, &frames, Dims::G1, small_chunks());
+    }
+    let ds = Dataset::open(dir.path(), ReadOptions::default()).unwrap();
+    let spec = WindowSpec::new(3, 2).unwrap();
+    let shard_of = |w: &dreampolicy::data::Window| (w.states[0] as u32 / 10_000) as usize;
+    let key = |w: &dreampolicy::data::Window| (w.episode, w.first_step);
+    let in_order: Vec<_> = ds.windows(spec, None).map(|w| w.unwrap()).collect();
+    let mixed: Vec<_> = ds
+        .interleaved_windows_of(spec, None, &[], 7)
+        .map(|w| w.unwrap())
+        .collect();
+    assert_eq!(mixed.len(), in_order.len());
+    let set = |ws: &[dreampolicy::data::Window]| ws.iter().map(key).collect::<BTreeSet<_>>();
+    assert_eq!(set(&mixed), set(&in_order));
+    // the stream's first quarter: in order one shard, interleaved all four in proportion
+    let quarter = in_order.len() / 4;
+    let shards_in = |ws: &[dreampolicy::data::Window]| {
+        let mut n = [0usize; 4];
+        ws.iter().for_each(|w| n[shard_of(w)] += 1);
+        n
+    };
+    let first = shards_in(&in_order[..quarter]);
+    assert!(first[1..].iter().all(|&n| n == 0), "{first:?}");
+    let total = shards_in(&in_order);
+    for (part, ws) in [(0, &mixed[..quarter]), (1, &mixed[quarter..2 * quarter])] {
+        let n = shards_in(ws);
+        for s in 0..4 {
+            let share = n[s] as f64 / quarter as f64;
+            let whole = total[s] as f64 / in_order.len() as f64;
+            assert!(
+                (share - whole).abs() < 0.1,
+                "quarter {part}, shard {s}: {share:.2} of the windows against {whole:.2} overall"
+            );
+        }
+    }
+    // seeded
+    let again: Vec<_> = ds
+        .interleaved_windows_of(spec, None, &[], 7)
+        .map(|w| key(&w.unwrap()))
+        .collect();
+    assert_eq!(again, mixed.iter().map(key).collect::<Vec<_>>());
+    let other: Vec<_> = ds
+        .interleaved_windows_of(spec, None, &[], 8)
+        .map(|w| key(&w.unwrap()))
+        .collect();
+    assert_ne!(other, again);
+    // a split side and a kinds filter keep the same windows as in order
+    let split = Some((SplitSpec::new(0.3, 1).unwrap(), Split::Train));
+    let kinds = [TerrainKind::ALL[0], TerrainKind::ALL[2]];
+    let a: Vec<_> = ds
+        .windows_of(spec, split, &kinds)
+        .map(|w| w.unwrap())
+        .collect();
+    let b: Vec<_> = ds
+        .interleaved_windows_of(spec, split, &kinds, 3)
+        .map(|w| w.unwrap())
+        .collect();
+    assert!(!a.is_empty() && a.len() < in_order.len());
+    assert_eq!(set(&a), set(&b));
+}

@@ -30,7 +30,7 @@ pub use meta::{DatasetInfo, ShardMeta};
 pub use reader::{DataWarning, Dataset, EpisodeFilter, OnTruncated, ReadOptions, ShardReader};
 pub use sample::{Shuffle, Split, SplitSpec};
 pub use stats::{DatasetStats, DimStats};
-pub use window::{Window, WindowSpec, Windows};
+pub use window::{Interleaved, Window, WindowSpec, Windows};
 pub use writer::{episode_id, shard_file_name, ShardWriter, WriterOptions};
 
 /// Everything that can go wrong reading or writing a dataset; every variant that

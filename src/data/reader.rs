@@ -372,6 +372,7 @@ impl Dataset {
     pub fn frames(&self) -> Frames {
         Frames {
             shards: self.shards.clone(),
+            base: 0,
             next: 0,
             current: None,
             opts: self.opts,
@@ -389,11 +390,24 @@ impl Dataset {
             ..self.frames()
         }
     }
+
+    /// The frames of shard `i` alone (those of the episodes `keep` accepts,
+    /// all with `None`), each with its index `i` in the dataset.
+    pub fn shard_frames(&self, i: usize, keep: Option<EpisodeFilter>) -> Frames {
+        Frames {
+            shards: self.shards.get(i).cloned().into_iter().collect(),
+            base: i,
+            filter: keep,
+            ..self.frames()
+        }
+    }
 }
 
 /// Iterator over a dataset's frames: `(shard index, frame)`.
 pub struct Frames {
     shards: Vec<PathBuf>,
+    /// Index in the dataset of `shards[0]`.
+    base: usize,
     next: usize,
     current: Option<(usize, ShardReader)>,
     opts: ReadOptions,
@@ -450,7 +464,7 @@ impl Iterator for Frames {
                         Some(keep) => r.with_filter(keep.clone()),
                         None => r,
                     };
-                    self.current = Some((i, r))
+                    self.current = Some((self.base + i, r))
                 }
                 Err(e) => {
                     if let Some(e) = self.absorb(e) {

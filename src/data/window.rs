@@ -6,6 +6,9 @@
 use std::collections::{HashMap, VecDeque};
 use std::sync::Arc;
 
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
 use super::frame::{Dims, Frame};
 use super::reader::Dataset;
 use super::sample::{Split, SplitSpec};
@@ -212,6 +215,49 @@ where
     }
 }
 
+/// `frames` of `kinds`' episodes only (all when `kinds` is empty).
+fn only_kinds(frames: FrameStream, kinds: &[TerrainKind]) -> FrameStream {
+    if kinds.is_empty() {
+        return frames;
+    }
+    let kinds = kinds.to_vec();
+    Box::new(frames.filter(move |r| r.as_ref().map_or(true, |(_, f)| kinds.contains(&f.terrain))))
+}
+
+/// The windows of every shard of a dataset, read side by side
+/// ([`Dataset::interleaved_windows_of`]); an error ends its shard's stream.
+pub struct Interleaved {
+    /// (weight, the shard's windows), for the shards not yet exhausted.
+    streams: Vec<(f64, Windows<FrameStream>)>,
+    rng: ChaCha8Rng,
+}
+
+impl Iterator for Interleaved {
+    type Item = Result<Window, DataError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        while !self.streams.is_empty() {
+            let total: f64 = self.streams.iter().map(|s| s.0).sum();
+            let mut x = self.rng.random::<f64>() * total;
+            let mut pick = self.streams.len() - 1;
+            for (i, (w, _)) in self.streams.iter().enumerate() {
+                if x < *w {
+                    pick = i;
+                    break;
+                }
+                x -= w;
+            }
+            match self.streams[pick].1.next() {
+                Some(w) => return Some(w),
+                None => {
+                    self.streams.remove(pick);
+                }
+            }
+        }
+        None
+    }
+}
+
 /// A boxed stream of `(shard index, frame)`.
 pub type FrameStream = Box<dyn Iterator<Item = Result<(usize, Frame), DataError>> + Send>;
 
@@ -233,12 +279,41 @@ impl Dataset {
         split: Option<(SplitSpec, Split)>,
         kinds: &[crate::terrain::TerrainKind],
     ) -> FrameStream {
-        let all = self.split_frames(split);
-        if kinds.is_empty() {
-            return all;
+        only_kinds(self.split_frames(split), kinds)
+    }
+
+    /// [`Dataset::windows_of`] with the shards read side by side instead of one
+    /// after another: each window comes from a shard drawn at random (`seed`),
+    /// weighted by its size on disk, so that every stretch of the stream holds
+    /// every shard's terrain in proportion. `collect` writes one specialist's
+    /// shards after another's and the windows of a shard by time step, so read
+    /// in order a bounded shuffle holds a few thousand windows of one terrain
+    /// and a trainer sees the terrains one after another, forgetting each.
+    pub fn interleaved_windows_of(
+        &self,
+        spec: WindowSpec,
+        split: Option<(SplitSpec, Split)>,
+        kinds: &[crate::terrain::TerrainKind],
+        seed: u64,
+    ) -> Interleaved {
+        let keep: Option<super::reader::EpisodeFilter> =
+            split.map(|(sp, side)| -> super::reader::EpisodeFilter {
+                Arc::new(move |episode| sp.of(episode) == side)
+            });
+        let streams = (0..self.shards().len())
+            .map(|i| {
+                let bytes = std::fs::metadata(&self.shards()[i]).map_or(1, |m| m.len().max(1));
+                let frames: FrameStream = Box::new(self.shard_frames(i, keep.clone()));
+                (
+                    bytes as f64,
+                    Windows::new(only_kinds(frames, kinds), spec, self.dims()),
+                )
+            })
+            .collect();
+        Interleaved {
+            streams,
+            rng: ChaCha8Rng::seed_from_u64(seed),
         }
-        let kinds = kinds.to_vec();
-        Box::new(all.filter(move |r| r.as_ref().map_or(true, |(_, f)| kinds.contains(&f.terrain))))
     }
 
     /// [`Dataset::windows`] over the episodes of `kinds` only (all when empty).

@@ -12,8 +12,8 @@ use tch::{Device, Tensor};
 use super::denoiser::Normalizer;
 use super::WmError;
 use crate::data::sample::splitmix64;
-use crate::data::window::FrameStream;
-use crate::data::{Dataset, Shuffle, Split, SplitSpec, Window, WindowSpec, Windows};
+use crate::data::window::Interleaved;
+use crate::data::{Dataset, Shuffle, Split, SplitSpec, Window, WindowSpec};
 use crate::world_model::config::WorldModelConfig;
 
 /// A batch of sequences as normalized tensors.
@@ -81,7 +81,7 @@ impl SeqBatch {
     }
 }
 
-type Stream = Shuffle<Windows<FrameStream>, Window>;
+type Stream = Shuffle<Interleaved, Window>;
 
 /// The train split's sequences, epoch after epoch.
 pub struct Sequences {
@@ -135,15 +135,17 @@ impl Sequences {
         &self.dataset
     }
 
+    /// An epoch's stream: the shards read side by side (a stretch of the
+    /// stream holds every terrain), then the bounded shuffle.
     fn open(&self) -> Stream {
-        let windows =
-            self.dataset
-                .windows_of(self.spec, Some((self.split, Split::Train)), &self.kinds);
-        Shuffle::new(
-            windows,
-            self.shuffle,
-            splitmix64(self.seed ^ splitmix64(self.epoch)),
-        )
+        let seed = splitmix64(self.seed ^ splitmix64(self.epoch));
+        let windows = self.dataset.interleaved_windows_of(
+            self.spec,
+            Some((self.split, Split::Train)),
+            &self.kinds,
+            splitmix64(seed ^ 0x5eed),
+        );
+        Shuffle::new(windows, self.shuffle, seed)
     }
 
     /// Continue at `consumed` sequences into epoch `epoch` (reads and drops the
