@@ -48,7 +48,7 @@ fn tiny_checkpoint(dir: &Path) -> PathBuf {
         "data: {{path: '{}', val_fraction: 0.5, shuffle: 64}}
 model: {{history: 2, horizon: 4, layers: 2, hidden: 32, heads: 2, mlp_ratio: 2, terrain_hidden: [32], terrain_dim: 16, step_features: 16}}
 diffusion: {{steps: 20, schedule: cosine, terrain_drop: 0.2}}
-sampling: {{sampler: ddim, ddim_steps: 4, guidance: 2.0}}
+sampling: {{sampler: ddim, ddim_steps: 4, guidance: 5.0}}
 train: {{iterations: 12, batch_size: 16, learning_rate: 3.0e-3, ema_decay: 0.5, rollout_windows: 2,
   supervised_iterations: 12, scheduled_iterations: 0,
   rollout_sampling: {{sampler: ddim, ddim_steps: 3, guidance: 2.0}},
@@ -132,7 +132,30 @@ fn eval_world_model_reports_every_measurement() {
         assert_eq!(s.donor, "other kinds", "{kind}");
         assert!(s.scan_distance_m > 0.0, "{kind}");
         assert!(s.distance > 0.0 && s.seed_spread > 0.0, "{kind}: {s:?}");
+        // where the default sampler's guidance is one of the three, the same prediction
+        if let Some(v) = s.rmse_by_guidance.get(&r.sampling.guidance.to_string()) {
+            assert!((v - s.rmse_real).abs() < 1e-9, "{kind}: {s:?}");
+        }
+        let keys: Vec<&str> = s.rmse_by_guidance.keys().map(String::as_str).collect();
+        assert_eq!(keys, ["0", "1", "5"], "{kind}");
+        assert!(s
+            .rmse_by_guidance
+            .values()
+            .all(|v| v.is_finite() && *v > 0.0));
     }
+    // the kinds' hold errors make up the whole set's (equal windows per kind)
+    let per_kind = (r
+        .terrain_sensitivity
+        .values()
+        .map(|s| s.hold_rmse.powi(2))
+        .sum::<f64>()
+        / r.terrain_sensitivity.len() as f64)
+        .sqrt();
+    let whole = (r.hold_rmse.iter().map(|h| h * h).sum::<f64>() / r.hold_rmse.len() as f64).sqrt();
+    assert!(
+        (per_kind - whole).abs() < 1e-4 * whole,
+        "{per_kind} vs {whole}"
+    );
     // drift: 10 frames = 3 calls of H = 4; no episode holds K + 250 frames
     let d = r.drift["10"].metrics.as_ref().expect("10-frame drift");
     assert_eq!(d.per_call_rmse.len(), 3);

@@ -112,6 +112,21 @@ pub fn run(a: EvalWmArgs) -> Result<()> {
             s.rmse_shuffled
         );
     }
+    println!("\none call per terrain kind (normalized RMSE over H, real scandots, the default sampler):\n| terrain | hold last | guidance 0 | guidance 1 | guidance 5 |\n|---|---|---|---|---|");
+    for (kind, s) in &r.terrain_sensitivity {
+        let g = |w: &str| {
+            s.rmse_by_guidance
+                .get(w)
+                .map_or("-".into(), |v| format!("{v:.4}"))
+        };
+        println!(
+            "| {kind} | {:.4} | {} | {} | {} |",
+            s.hold_rmse,
+            g("0"),
+            g("1"),
+            g("5")
+        );
+    }
     println!("\nsamplers (guidance {}):\n| sampler | RMSE | RMSE at H | joint_pos (rad) | ms per call ({} windows) | ms at batch 1 |\n|---|---|---|---|---|---|", r.sampling.guidance, r.windows);
     let mut ss: Vec<_> = r.samplers.iter().collect();
     ss.sort_by_key(|(_, s)| (s.sampler == SamplerKind::Ddim, s.steps));

@@ -295,6 +295,7 @@ pub fn evaluate(checkpoint: &Path, opts: &WmEvalOptions) -> Result<WmEvalReport,
     let scan_shuf = scan.index_select(0, &Tensor::from_slice(&donor).to_device(dev));
 
     let mut guidance = BTreeMap::new();
+    let mut by_guidance = Vec::new();
     for &w in &GUIDANCE {
         let sw = SamplingConfig {
             guidance: w,
@@ -310,7 +311,9 @@ pub fn evaluate(checkpoint: &Path, opts: &WmEvalOptions) -> Result<WmEvalReport,
                 terrain_distance: rms(&(ctx.norm(&p) - ctx.norm(&q))),
             },
         );
+        by_guidance.push((format!("{w}"), ctx.norm(&p)));
     }
+    let hold_n = ctx.norm(&anchor);
 
     // terrain sensitivity per kind, the default sampler
     let pred_shuf = ctx.predict(&hist, &scan_shuf, &sc, seed_a)?;
@@ -337,6 +340,11 @@ pub fn evaluate(checkpoint: &Path, opts: &WmEvalOptions) -> Result<WmEvalReport,
                 ratio: (seed_spread > 0.0).then(|| distance / seed_spread),
                 rmse_real: rms(&(sel(&pn) - sel(&real_n))),
                 rmse_shuffled: rms(&(sel(&qn) - sel(&real_n))),
+                hold_rmse: rms(&(sel(&hold_n) - sel(&real_n))),
+                rmse_by_guidance: by_guidance
+                    .iter()
+                    .map(|(w, t)| (w.clone(), rms(&(sel(t) - sel(&real_n)))))
+                    .collect(),
             },
         );
     }

@@ -72,6 +72,11 @@ pub struct Sensitivity {
     pub ratio: Option<f64>,
     pub rmse_real: f64,
     pub rmse_shuffled: f64,
+    /// The anchor state held over the horizon, on these windows (normalized).
+    pub hold_rmse: f64,
+    /// One call with the real scandots at each guidance of `guidance`
+    /// (`"0"`, `"1"`, `"5"`), the config's sampler, on these windows.
+    pub rmse_by_guidance: BTreeMap<String, f64>,
 }
 
 /// Errors of an autoregressive rollout against the real frames.
