@@ -307,7 +307,7 @@ pub fn collect(
                 })?;
             }
             let max_level = spec.max_level.or(cfg.max_level);
-            let s = collect_shard(cfg, ck, (kind, max_level), shard, round, dir, &info, quiet)?;
+            let s = collect_shard(cfg, ck, kind, max_level, shard, round, dir, &info, quiet)?;
             shards.push(s);
         }
     }
@@ -353,7 +353,8 @@ pub fn collect(
 fn collect_shard(
     cfg: &CollectConfig,
     ck: &Checkpoint,
-    (kind, max_level): (TerrainKind, Option<usize>),
+    kind: TerrainKind,
+    max_level: Option<usize>,
     shard: u32,
     round: usize,
     dir: &Path,

@@ -10,7 +10,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::frame::{Dims, Frame};
-use super::reader::Dataset;
+use super::reader::{Dataset, EpisodeFilter};
 use super::sample::{Split, SplitSpec};
 use super::DataError;
 use crate::terrain::TerrainKind;
@@ -215,6 +215,11 @@ where
     }
 }
 
+/// The episode filter of one side of a split (None: every episode).
+fn split_filter(split: Option<(SplitSpec, Split)>) -> Option<EpisodeFilter> {
+    split.map(|(spec, side)| -> EpisodeFilter { Arc::new(move |episode| spec.of(episode) == side) })
+}
+
 /// `frames` of `kinds`' episodes only (all when `kinds` is empty).
 fn only_kinds(frames: FrameStream, kinds: &[TerrainKind]) -> FrameStream {
     if kinds.is_empty() {
@@ -264,11 +269,9 @@ pub type FrameStream = Box<dyn Iterator<Item = Result<(usize, Frame), DataError>
 impl Dataset {
     /// The frames of one side of a split (all frames with `None`).
     pub fn split_frames(&self, split: Option<(SplitSpec, Split)>) -> FrameStream {
-        match split {
+        match split_filter(split) {
             None => Box::new(self.frames()),
-            Some((spec, side)) => {
-                Box::new(self.frames_where(Arc::new(move |episode| spec.of(episode) == side)))
-            }
+            Some(keep) => Box::new(self.frames_where(keep)),
         }
     }
 
@@ -296,13 +299,13 @@ impl Dataset {
         kinds: &[crate::terrain::TerrainKind],
         seed: u64,
     ) -> Interleaved {
-        let keep: Option<super::reader::EpisodeFilter> =
-            split.map(|(sp, side)| -> super::reader::EpisodeFilter {
-                Arc::new(move |episode| sp.of(episode) == side)
-            });
-        let streams = (0..self.shards().len())
-            .map(|i| {
-                let bytes = std::fs::metadata(&self.shards()[i]).map_or(1, |m| m.len().max(1));
+        let keep = split_filter(split);
+        let streams = self
+            .shards()
+            .iter()
+            .enumerate()
+            .map(|(i, path)| {
+                let bytes = std::fs::metadata(path).map_or(1, |m| m.len().max(1));
                 let frames: FrameStream = Box::new(self.shard_frames(i, keep.clone()));
                 (
                     bytes as f64,

@@ -174,19 +174,14 @@ pub fn average(paths: &[PathBuf], out: &Path) -> Result<CheckpointMeta, RlError>
     let Some(last) = paths.last() else {
         return Err(RlError::Invalid("average: no checkpoint given".into()));
     };
+    // Checkpoint::read refuses another format
     let files = paths
         .iter()
-        .map(|p| NamedTensors::<CheckpointMeta>::read(p))
+        .map(|p| Checkpoint::read(p).map(|c| c.file))
         .collect::<Result<Vec<_>, _>>()?;
     let base = &files[files.len() - 1];
     let names = base.names();
     for f in &files {
-        if f.meta.format != FORMAT {
-            return Err(err(
-                &f.path,
-                format!("format {} (this build reads {FORMAT})", f.meta.format),
-            ));
-        }
         if f.names() != names {
             return Err(err(
                 &f.path,
