@@ -207,7 +207,7 @@ fn the_committed_walker_refuses_24_copies_with_8_flipped_bytes_in_eval() {
 #[test]
 fn a_damaged_world_model_checkpoint_is_refused() {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("models/checkpoints/world_model/checkpoints/latest.pt");
+        .join("models/checkpoints/world_model_expert/checkpoints/latest.pt");
     let dir = Scratch::new("wmdamage");
     let bytes = std::fs::read(&path).unwrap();
     dreampolicy::world_model::WmCheckpoint::read(&path).unwrap();

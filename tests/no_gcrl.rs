@@ -28,7 +28,7 @@ fn the_controller_executes_the_action_slot_of_the_predicted_next_state() {
     // the same prediction made apart: the same world model, noise seed and input
     let wm = WorldModel::load(
         std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("models/checkpoints/world_model/checkpoints/latest.pt")
+            .join("models/checkpoints/world_model_expert/checkpoints/latest.pt")
             .as_path(),
         Device::Cpu,
     )
