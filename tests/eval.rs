@@ -44,6 +44,8 @@ fn eval_counts_successes_time_outs_and_completion() {
     assert_eq!(r.success_rate, 1.0);
     assert_eq!(r.completion_rate, 1.0);
     assert!(r.full_collision);
+    // flat walks are on the plane: no lanes to name
+    assert_eq!((r.lanes, r.per_lane.len()), (None, 0));
 
     // a 50 m lane in 0.5 s: nobody arrives; an untrained policy stands or falls
     let dir2 = Scratch::new("eval2");
@@ -386,6 +388,17 @@ fn terrain_lanes_are_walked_and_episodes_spread_over_lanes() {
     assert_eq!((r.episodes, r.success_rate), (5, 1.0));
     assert_eq!(r.level, Some(5));
     assert_eq!(r.terrain, "stair");
+    // the report names the lanes and what each gave: 5 walks over 2 lanes
+    // (seeds `seed` and `seed + 1`), 3 on the first, 2 on the second
+    assert_eq!(r.lanes, Some(2));
+    let lanes: Vec<_> = r
+        .per_lane
+        .iter()
+        .map(|l| (l.seed, l.episodes, l.successes, l.completion))
+        .collect();
+    assert_eq!(lanes, [(3, 3, 3, 1.0), (4, 2, 2, 1.0)]);
+    let json = serde_json::to_value(&r).unwrap();
+    assert_eq!(json["per_lane"][1]["episodes"], 2);
     // `--level` overrides eval.level; a level the table lacks is refused
     let r = evaluate(
         &ck,

@@ -162,8 +162,10 @@ pub fn run(a: EvalArgs) -> Result<()> {
                 .with_context(|| format!("evaluating {name} on {lane}"))?;
             if !a.json {
                 println!(
-                    "{name}: {} lanes of {:.0} m ({}{}): success {:.3}, completion {:.3}, velocity error {:.3} m/s, {} falls, {} time-outs, mean speed {:.2} m/s (commanded {:.2}), ankle {:.3} m at the top of a swing, {:.3} m in stance, swing rise {:.3} m",
-                    r.episodes, r.lane_length, r.terrain,
+                    "{name}: {} walks of {:.0} m{} ({}{}): success {:.3}, completion {:.3}, velocity error {:.3} m/s, {} falls, {} time-outs, mean speed {:.2} m/s (commanded {:.2}), ankle {:.3} m at the top of a swing, {:.3} m in stance, swing rise {:.3} m",
+                    r.episodes, r.lane_length,
+                    r.lanes.map(|n| format!(" on {n} lanes")).unwrap_or_default(),
+                    r.terrain,
                     r.level.map(|l| format!(", level {l}")).unwrap_or_default(),
                     r.success_rate, r.completion_rate,
                     r.vel_tracking_error, r.falls, r.timeouts, r.mean_forward_speed, r.mean_commanded_speed,
@@ -199,7 +201,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
         dreampolicy::plot::heatmap(
             path,
             &format!(
-                "Success rate over {} lanes of 10 m (rows: policy, columns: terrain)",
+                "Success rate over {} walks of 10 m (rows: policy, columns: terrain)",
                 a.episodes
             ),
             &names,

@@ -82,6 +82,24 @@ pub struct EvalReport {
     /// `eval.*` overrides of the checkpoint's stored config (`eval --set`).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub eval_sets: Vec<String>,
+    /// Distinct lanes (terrain seeds) the episodes were shared over
+    /// (`eval.lanes`, at most `episodes`); None on the plane. Episodes on one
+    /// lane walk the same ground, so the rates' spread between evaluations
+    /// follows the number of lanes more than the number of episodes.
+    pub lanes: Option<usize>,
+    /// Each lane's seed, episodes, successes and mean completion, in order
+    /// (empty and left out on the plane).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub per_lane: Vec<LaneResult>,
+}
+
+/// One lane of an evaluation.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct LaneResult {
+    pub seed: u64,
+    pub episodes: usize,
+    pub successes: usize,
+    pub completion: f64,
 }
 
 /// Shorter flights of a foot (a contact lost for a step or two while it
@@ -205,6 +223,7 @@ pub fn evaluate_in(
     let length = cfg.eval.lane_length;
     let level = o.level.unwrap_or(cfg.eval.level);
     let mut t = Tally::default();
+    let mut per_lane = Vec::new();
     if o.terrain == TerrainKind::Flat {
         let env = VecEnv::new(env_cfg)?;
         run_in(ck, cfg, env, o.episodes, length, &mut t)?;
@@ -219,7 +238,14 @@ pub fn evaluate_in(
             lane_cfg.seed = o.seed.wrapping_add(1000 * k as u64);
             let scene = Scene::with_terrain(&lane_cfg, Some(Arc::new(lane.map().clone())))?;
             let env = VecEnv::with_scene(&lane_cfg, scene)?;
+            let (done, successes, completion) = (t.done, t.successes, t.completion);
             run_in(ck, cfg, env, count, length, &mut t)?;
+            per_lane.push(LaneResult {
+                seed,
+                episodes: t.done - done,
+                successes: t.successes - successes,
+                completion: (t.completion - completion) / (t.done - done).max(1) as f64,
+            });
         }
     }
     let d = t.done as f64;
@@ -256,6 +282,8 @@ pub fn evaluate_in(
             .then_some(cfg.eval.terrain.uneven.heights),
         hfield_contacts: (o.terrain != TerrainKind::Flat).then_some(env_cfg.sim.hfield_contacts),
         eval_sets: ck.eval_sets().to_vec(),
+        lanes: (o.terrain != TerrainKind::Flat).then_some(per_lane.len()),
+        per_lane,
     })
 }
 
