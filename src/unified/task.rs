@@ -298,7 +298,6 @@ impl UnifiedTask {
         let mut held = vec![0.0f32; h * d];
         for (j, &i) in due.iter().enumerate() {
             let newest = &self.history.row(i)[(k - 1) * d..];
-            let clean = &self.env.critic()[i * CRITIC_DIM..i * CRITIC_DIM + d];
             let mut row = &pred[j * h * d..(j + 1) * h * d];
             if row.iter().any(|v| !v.is_finite()) {
                 for c in held.chunks_exact_mut(d) {
@@ -308,8 +307,8 @@ impl UnifiedTask {
                 self.sums.nonfinite += 1;
             } else {
                 // a real transition for the discriminator: (s_t, ŝ_{t+1})
-                self.real
-                    .extend(Discriminator::features(clean, &row[..d], d));
+                let s_t = clean_state(self.env.critic(), i);
+                self.real.extend(Discriminator::features(s_t, &row[..d], d));
             }
             self.plan.set(i, row);
         }
@@ -328,7 +327,7 @@ impl UnifiedTask {
     fn step_inner(&mut self, actions: &[f32]) -> StepInfo {
         let n = self.env.n_envs();
         for (i, c) in self.prev_clean.chunks_exact_mut(OBS_DIM).enumerate() {
-            c.copy_from_slice(&self.env.critic()[i * CRITIC_DIM..i * CRITIC_DIM + OBS_DIM]);
+            c.copy_from_slice(clean_state(self.env.critic(), i));
         }
         let mut info = self.env.step(actions);
         self.outcomes.copy_from_slice(&self.env.outcomes);
@@ -360,7 +359,7 @@ impl UnifiedTask {
             let critic = self.env.critic();
             for &i in &fake_envs {
                 s.extend_from_slice(&self.prev_clean[i * d..(i + 1) * d]);
-                s2.extend_from_slice(&critic[i * CRITIC_DIM..i * CRITIC_DIM + d]);
+                s2.extend_from_slice(clean_state(critic, i));
             }
             let rows = Discriminator::features(&s, &s2, d);
             let style = self.disc.style_reward(&rows);
@@ -395,6 +394,11 @@ impl UnifiedTask {
             / n as f64;
         info
     }
+}
+
+/// Env `i`'s noise-free state: the first `OBS_DIM` entries of its critic row.
+fn clean_state(critic: &[f32], i: usize) -> &[f32] {
+    &critic[i * CRITIC_DIM..i * CRITIC_DIM + OBS_DIM]
 }
 
 impl VecTask for UnifiedTask {
