@@ -197,14 +197,35 @@ impl<M: DeserializeOwned> NamedTensors<M> {
             .ok_or_else(|| invalid(path, "no 'meta' record: not a dreampolicy checkpoint"))?;
         let bytes = Vec::<u8>::try_from(&meta_t.to_kind(Kind::Uint8))
             .map_err(|e| invalid(path, e.to_string()))?;
-        let meta: M = serde_json::from_slice(&bytes)
-            .map_err(|e| invalid(path, format!("bad meta record: {e}")))?;
+        let meta: M = serde_json::from_slice(&bytes).map_err(|e| {
+            invalid(
+                path,
+                match foreign_kind(&bytes) {
+                    Some(kind) => format!(
+                        "this is a {kind} checkpoint, not the kind this command reads \
+                         (its meta record: {e})"
+                    ),
+                    None => format!("bad meta record: {e}"),
+                },
+            )
+        })?;
         Ok(NamedTensors {
             path: path.to_path_buf(),
             meta,
             tensors,
         })
     }
+}
+
+/// What kind of checkpoint a meta record that did not parse belongs to, when
+/// it says: its `kind` field (world models, datasets), or "policy" for a
+/// trainer's record (it counts `env_steps`).
+fn foreign_kind(meta: &[u8]) -> Option<String> {
+    let v: serde_json::Value = serde_json::from_slice(meta).ok()?;
+    if let Some(kind) = v.get("kind").and_then(|k| k.as_str()) {
+        return Some(kind.replace('_', " "));
+    }
+    v.get("env_steps").map(|_| "policy".to_string())
 }
 
 impl<M> NamedTensors<M> {

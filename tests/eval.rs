@@ -551,3 +551,26 @@ fn eval_cli_prints_the_cross_terrain_matrix_and_heatmap() {
     let bytes = std::fs::read(&png).unwrap();
     assert_eq!(&bytes[1..4], b"PNG");
 }
+
+#[test]
+fn a_specialist_takes_no_inference_keys_and_is_no_world_model() {
+    // the unified policy's inference keys (world model, sampler, re-planning)
+    // mean nothing to a policy that reads no plan
+    let mut ck = Checkpoint::read(&common::walker_path()).unwrap();
+    let e = ck
+        .set_eval(&["unified.sampling.guidance=5".into()])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("only eval.* keys") && !e.contains("inference"),
+        "{e}"
+    );
+    ck.set_eval(&["eval.time_limit_s=40".into()]).unwrap();
+    assert_eq!(ck.config().unwrap().eval.time_limit_s, 40.0);
+    // a policy checkpoint given where a world model is read says what it is
+    let e = match dreampolicy::world_model::WmCheckpoint::read(&common::walker_path()) {
+        Ok(_) => panic!("a policy checkpoint read as a world model"),
+        Err(e) => e.to_string(),
+    };
+    assert!(e.contains("this is a policy checkpoint"), "{e}");
+}

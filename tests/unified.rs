@@ -343,6 +343,39 @@ fn a_resumed_tiny_unified_run_is_bit_identical() {
         assert_eq!(r.episodes, 2);
         assert!((0.0..=1.0).contains(&r.completion_rate), "{r:?}");
     }
+    // the inference keys change the plans, not the policy: eval takes them
+    // (and records them), a training key is refused
+    let mut cg = Checkpoint::read(&latest_checkpoint(&a.0)).unwrap();
+    cg.set_eval(&[
+        "unified.sampling.guidance=5".into(),
+        "unified.replan_every=1".into(),
+    ])
+    .unwrap();
+    let u = cg.config().unwrap();
+    let u: dreampolicy::unified::config::UnifiedConfig =
+        serde_yaml::from_value(u.unified.unwrap()).unwrap();
+    assert_eq!((u.sampling.guidance, u.replan_every), (5.0, 1));
+    let o = dreampolicy::eval::EvalOptions {
+        terrain: TerrainKind::Flat,
+        then: None,
+        episodes: 1,
+        full_collision: true,
+        seed: 0,
+        threads: 1,
+        level: None,
+        table: dreampolicy::eval::EvalTable::Eval,
+        lane_lookahead: None,
+    };
+    let r = dreampolicy::eval::evaluate(&cg, &o).unwrap();
+    assert_eq!(
+        r.eval_sets,
+        ["unified.sampling.guidance=5", "unified.replan_every=1"]
+    );
+    let e = cg
+        .set_eval(&["unified.style_weight=0".into()])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("inference keys"), "{e}");
     exported_bundle_runs_the_inference_loop(&ca, &a.0.join("bundle"));
     // and `play` draws the plan beside the robot
     let mcap = a.0.join("play.mcap");

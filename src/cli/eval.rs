@@ -65,11 +65,18 @@ pub struct EvalArgs {
     #[arg(long, default_value_t = 2)]
     threads: usize,
     /// Change the evaluation protocol stored in each checkpoint's config
-    /// (`eval.*` keys only), e.g. `--set eval.terrain.uneven.heights=full`
+    /// (`eval.*` keys), e.g. `--set eval.terrain.uneven.heights=full`
     /// (the uneven lanes as scored before 2026-12-04) or `--set
-    /// eval.time_limit_s=40` (repeatable).
+    /// eval.time_limit_s=40` (repeatable). A unified policy also takes its
+    /// inference keys: `unified.sampling.guidance=5`,
+    /// `unified.sampling.ddim_steps=10`, `unified.sampling.sampler=ddpm`,
+    /// `unified.replan_every=1`.
     #[arg(long = "set", value_name = "eval.KEY=VALUE")]
     set: Vec<String>,
+    /// A unified policy's plans from this world-model checkpoint instead of
+    /// the one its config names (`--set unified.world_model=F`).
+    #[arg(long)]
+    world_model: Option<PathBuf>,
     /// Also write the JSON report (one evaluation) or matrix to this file.
     #[arg(long)]
     out: Option<PathBuf>,
@@ -139,7 +146,10 @@ pub fn run(a: EvalArgs) -> Result<()> {
         .iter()
         .map(|p| {
             let mut ck = Checkpoint::read(p)?;
-            ck.set_eval(&a.set)?;
+            ck.set_eval(&dreampolicy::rl::checkpoint::with_world_model(
+                &a.set,
+                a.world_model.as_deref(),
+            ))?;
             Ok(ck)
         })
         .collect::<Result<Vec<_>, dreampolicy::rl::RlError>>()?;

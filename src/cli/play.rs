@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 
 use dreampolicy::play::{self, PlayOptions};
-use dreampolicy::rl::checkpoint::Checkpoint;
+use dreampolicy::rl::checkpoint::{self, Checkpoint};
 use dreampolicy::terrain::TerrainKind;
 
 /// The rollout `play` and `render` share: checkpoint, lane, speed, seed, scene.
@@ -41,13 +41,26 @@ pub struct LaneArgs {
     /// libtorch threads.
     #[arg(long, default_value_t = 1)]
     threads: i32,
+    /// `eval.*` keys of the checkpoint's stored config, and a unified
+    /// policy's inference keys (`unified.sampling.guidance=5`, ...), as
+    /// `eval --set` takes them (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    set: Vec<String>,
+    /// A unified policy's plans from this world-model checkpoint instead of
+    /// the one its config names.
+    #[arg(long)]
+    world_model: Option<PathBuf>,
 }
 
 impl LaneArgs {
     /// The checkpoint, read, and the rollout's options writing to `out`.
     pub fn options(&self, out: PathBuf) -> Result<(Checkpoint, PlayOptions)> {
         let terrain = TerrainKind::from_name(&self.terrain)?;
-        let ck = Checkpoint::read(&self.checkpoint)?;
+        let mut ck = Checkpoint::read(&self.checkpoint)?;
+        ck.set_eval(&checkpoint::with_world_model(
+            &self.set,
+            self.world_model.as_deref(),
+        ))?;
         tch::set_num_threads(self.threads.max(1));
         let opts = PlayOptions {
             terrain,

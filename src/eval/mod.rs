@@ -79,7 +79,8 @@ pub struct EvalReport {
     /// How the robot touched the lanes' heightfield (`env.sim.hfield_contacts`
     /// of the eval scene) on non-flat lanes; None on the plane.
     pub hfield_contacts: Option<crate::env::config::HfieldContacts>,
-    /// `eval.*` overrides of the checkpoint's stored config (`eval --set`).
+    /// `eval.*` overrides of the checkpoint's stored config (`eval --set`),
+    /// and a unified policy's inference keys (its world model and sampler).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub eval_sets: Vec<String>,
     /// Distinct lanes (terrain seeds) the episodes were shared over

@@ -233,6 +233,25 @@ pub fn save_controller(path: &Path, meta: &CheckpointMeta) -> Result<(), RlError
     Ok(save_named(path, Vec::new(), meta)?)
 }
 
+/// The `--set` keys of a unified policy's inference that `eval`, `play` and
+/// `render` may change (prefixes): the world model the plans come from, its
+/// sampler, step count and guidance, and the re-planning interval.
+pub const INFERENCE_KEYS: [&str; 3] = [
+    "unified.world_model=",
+    "unified.sampling.",
+    "unified.replan_every=",
+];
+
+/// `sets` and, when given, `unified.world_model=<world_model>` after them
+/// (`--world-model F` of `eval`, `play` and `render`).
+pub fn with_world_model(sets: &[String], world_model: Option<&Path>) -> Vec<String> {
+    let mut all = sets.to_vec();
+    if let Some(w) = world_model {
+        all.push(format!("unified.world_model={}", w.display()));
+    }
+    all
+}
+
 impl Checkpoint {
     /// Read a checkpoint; a missing, truncated or foreign file is one clear error.
     pub fn read(path: &Path) -> Result<Checkpoint, RlError> {
@@ -256,15 +275,30 @@ impl Checkpoint {
         &self.eval_sets
     }
 
-    /// Change the stored config's evaluation protocol (`eval.*` keys only,
+    /// Change the stored config's evaluation protocol (`eval.*` keys,
     /// `key=value` as `--set` takes them, e.g.
     /// `eval.terrain.uneven.heights=full`) for every later [`Checkpoint::config`].
+    /// A unified policy's checkpoint also takes its inference keys
+    /// ([`INFERENCE_KEYS`]: the world model, its sampler and the re-planning
+    /// interval), which change the plans it reads, not its weights.
     /// Another key, or a value the config refuses, is an error and changes nothing.
     pub fn set_eval(&mut self, sets: &[String]) -> Result<(), RlError> {
-        if let Some(bad) = sets.iter().find(|s| !s.starts_with("eval.")) {
+        let unified = self.config()?.unified.is_some();
+        let allowed = |s: &str| {
+            s.starts_with("eval.") || (unified && INFERENCE_KEYS.iter().any(|k| s.starts_with(k)))
+        };
+        if let Some(bad) = sets.iter().find(|s| !allowed(s)) {
+            let also = if unified {
+                format!(
+                    " and the unified policy's inference keys ({})",
+                    INFERENCE_KEYS.join(", ")
+                )
+            } else {
+                String::new()
+            };
             return Err(RlError::Invalid(format!(
-                "--set {bad}: only eval.* keys (the evaluation protocol) can be changed here; \
-                 the policy and its training env are the checkpoint's"
+                "--set {bad}: only eval.* keys (the evaluation protocol){also} can be changed \
+                 here; the policy and its training env are the checkpoint's"
             )));
         }
         let all = [&self.eval_sets[..], sets].concat();
