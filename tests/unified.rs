@@ -356,15 +356,8 @@ fn a_resumed_tiny_unified_run_is_bit_identical() {
         serde_yaml::from_value(u.unified.unwrap()).unwrap();
     assert_eq!((u.sampling.guidance, u.replan_every), (5.0, 1));
     let o = dreampolicy::eval::EvalOptions {
-        terrain: TerrainKind::Flat,
-        then: None,
-        episodes: 1,
         full_collision: true,
-        seed: 0,
-        threads: 1,
-        level: None,
-        table: dreampolicy::eval::EvalTable::Eval,
-        lane_lookahead: None,
+        ..common::flat_eval(1)
     };
     let r = dreampolicy::eval::evaluate(&cg, &o).unwrap();
     assert_eq!(

@@ -283,6 +283,9 @@ impl Checkpoint {
     /// interval), which change the plans it reads, not its weights.
     /// Another key, or a value the config refuses, is an error and changes nothing.
     pub fn set_eval(&mut self, sets: &[String]) -> Result<(), RlError> {
+        if sets.is_empty() {
+            return Ok(());
+        }
         let unified = self.config()?.unified.is_some();
         let allowed = |s: &str| {
             s.starts_with("eval.") || (unified && INFERENCE_KEYS.iter().any(|k| s.starts_with(k)))
