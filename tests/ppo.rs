@@ -461,9 +461,46 @@ fn walker_transfers_into_a_scan_encoder_policy_acting_the_same() {
         .to_string()
         .contains("train.init_std"));
 
+    // wider hidden layers of the actor and critic (Net2Net): the old units
+    // copied, the new ones silent, so that the wider policy acts the same
+    let wide = load_config(
+        "test/g1_tiny.yaml",
+        &[
+            "policy.actor_hidden=[48,40]",
+            "policy.critic_hidden=[64,32]",
+        ],
+    );
+    let mut grown = Agent::new(&wide.policy, env.dims(), n, true);
+    let t = ck.transfer_agent(&mut grown).unwrap();
+    let mut names = t.grown.clone();
+    names.sort();
+    assert_eq!(
+        names,
+        [
+            "actor.0.bias",
+            "actor.0.weight",
+            "actor.1.bias",
+            "actor.1.weight",
+            "actor.2.weight",
+            "critic.0.bias",
+            "critic.0.weight",
+            "critic.1.weight"
+        ],
+        "{t}"
+    );
+    let mut walker_env = VecEnv::new(&walker_cfg.env).unwrap();
+    common::assert_acts_alike(&mut old, &mut grown, &mut walker_env, 3);
+    // ... and values alike: the critic's new units start silent too
+    let (critic, scan) = (walker_env.critic(), walker_env.scan());
+    let (v_old, v_new) = (old.values_of(critic, scan), grown.values_of(critic, scan));
+    assert!(
+        common::max_abs_diff(&v_old, &v_new) < 1e-5,
+        "{v_old:?} {v_new:?}"
+    );
+
     // other architecture changes are refused, naming the tensor
-    let wide = load_config("test/g1_tiny.yaml", &["policy.actor_hidden=[48,32]"]);
-    let mut agent = Agent::new(&wide.policy, env.dims(), n, true);
+    let narrow = load_config("test/g1_tiny.yaml", &["policy.actor_hidden=[16,32]"]);
+    let mut agent = Agent::new(&narrow.policy, env.dims(), n, true);
     let e = ck.transfer_agent(&mut agent).err().unwrap().to_string();
     assert!(
         e.contains("'actor.0.") && e.contains("only the scan encoders"),

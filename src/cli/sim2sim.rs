@@ -47,6 +47,11 @@ pub struct Sim2SimArgs {
     /// Episodes per cell instead of the config's `episodes`.
     #[arg(long)]
     episodes: Option<usize>,
+    /// Change the evaluation protocol of every cell, as in `eval` (`eval.*`
+    /// keys only: `--set eval.lanes=1000` walks every episode on its own lane
+    /// for a checkpoint whose config stores fewer lanes).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    sets: Vec<String>,
 }
 
 /// The command line's overrides of the matrix file, as flags for another
@@ -61,6 +66,9 @@ fn override_flags(a: &Sim2SimArgs) -> Vec<String> {
     }
     if let Some(n) = a.episodes {
         f.extend(["--episodes".to_string(), n.to_string()]);
+    }
+    for s in &a.sets {
+        f.extend(["--set".to_string(), s.clone()]);
     }
     f
 }
@@ -84,7 +92,8 @@ fn matrix(a: &Sim2SimArgs) -> Result<Sim2SimConfig> {
 
 pub fn run(a: Sim2SimArgs) -> Result<()> {
     let c = matrix(&a)?;
-    let ck = Checkpoint::read(&a.checkpoint)?;
+    let mut ck = Checkpoint::read(&a.checkpoint)?;
+    ck.set_eval(&a.sets)?;
     let cfg = ck.config()?;
     let quiet = a.this_build_only || a.json;
     let cells = sim2sim::run_cells(&ck, &cfg, &c, a.threads.max(1), |i, n, name| {

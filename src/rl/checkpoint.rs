@@ -92,6 +92,9 @@ pub struct Transfer {
     pub widened: Vec<String>,
     /// Scan-encoder tensors left at their fresh initialization.
     pub fresh: Vec<String>,
+    /// Actor and critic layers grown to wider hidden sizes (the old units
+    /// copied, the new units' outgoing weights zero).
+    pub grown: Vec<String>,
 }
 
 impl std::fmt::Display for Transfer {
@@ -102,6 +105,14 @@ impl std::fmt::Display for Transfer {
             self.copied.len(),
             self.widened.join(", "),
             self.fresh.join(", ")
+        )?;
+        if self.grown.is_empty() {
+            return Ok(());
+        }
+        write!(
+            f,
+            ", grown to wider hidden layers: [{}]",
+            self.grown.join(", ")
         )
     }
 }
@@ -383,8 +394,12 @@ impl Checkpoint {
     /// actor and the critic get zero columns where the scan latent enters (so the
     /// new policy acts exactly as the old one until training moves them); the
     /// scan encoders keep their fresh weights, and the scandot normalizer its
-    /// fresh statistics (a plane's scandots say nothing about terrain). Any
-    /// other difference is an error naming the tensor.
+    /// fresh statistics (a plane's scandots say nothing about terrain). The
+    /// actor's and critic's hidden layers may also be wider than the source's
+    /// (Net2Net): the old units are copied, the new units' incoming weights keep
+    /// their fresh initialization and their outgoing weights start at zero, so
+    /// that the wider policy too acts as the old one at first. Any other
+    /// difference is an error naming the tensor.
     pub fn transfer_agent(&self, agent: &mut Agent) -> Result<Transfer, RlError> {
         let src_cfg = self.config()?;
         let src_scan = src_cfg.policy.scan_encoder.enabled && self.meta.dims.scan > 0;
@@ -432,6 +447,21 @@ impl Checkpoint {
                 "critic.0.weight" => Some(0),
                 _ => None,
             };
+            // a wider actor or critic (Net2Net): the old units in the leading
+            // block, the new units' incoming weights fresh and their outgoing
+            // weights zero, so that the policy acts as the old one at first
+            if grows(&name, &ss, &ns) {
+                tch::no_grad(|| {
+                    if ns.len() == 2 {
+                        let _ = var.narrow(1, ss[1], ns[1] - ss[1]).zero_();
+                        var.narrow(0, 0, ss[0]).narrow(1, 0, ss[1]).copy_(src);
+                    } else {
+                        var.narrow(0, 0, ss[0]).copy_(src);
+                    }
+                });
+                report.grown.push(name);
+                continue;
+            }
             let widen = offset.filter(|_| {
                 !src_scan
                     && scan_out > 0
@@ -444,7 +474,7 @@ impl Checkpoint {
                 return Err(err(
                     &self.path,
                     format!(
-                        "tensor '{name}' has shape {ss:?}, the configured policy needs {ns:?}: only the scan encoders may be added (hidden sizes and history must match)"
+                        "tensor '{name}' has shape {ss:?}, the configured policy needs {ns:?}: only the scan encoders may be added and the actor's or critic's hidden layers widened (history and encoders must match)"
                     ),
                 ));
             };
@@ -514,4 +544,15 @@ impl Checkpoint {
         opt.lr = self.meta.learning_rate;
         Ok(())
     }
+}
+
+/// Whether `name` is a layer of the actor or critic MLP that grows from `old`
+/// to `new` (as many dims, none smaller, the input of a first layer unchanged).
+fn grows(name: &str, old: &[i64], new: &[i64]) -> bool {
+    (name.starts_with("actor.") || name.starts_with("critic."))
+        && old.len() == new.len()
+        && !old.is_empty()
+        && old.iter().zip(new).all(|(o, n)| n >= o)
+        && old != new
+        && !(name.ends_with(".0.weight") && old.get(1) != new.get(1))
 }
