@@ -124,6 +124,18 @@ fn eval_world_model_reports_every_measurement() {
     assert_eq!(r.terrain_sensitivity.len(), 5);
     let v = serde_json::to_value(&r).unwrap();
     assert!(all_finite(&v), "{v}");
+    // the yaw response: three rates written per input, the plan's yaw rate for
+    // each, and the dataset's spread (the tiny dataset's robots do turn)
+    let y = r
+        .yaw_response
+        .as_ref()
+        .expect("a G1 state has a yaw response");
+    assert_eq!(y.windows, 15);
+    assert_eq!(y.set_to, [-0.5, 0.0, 0.5]);
+    assert_eq!(y.predicted_by_command.len(), 3);
+    assert_eq!(y.predicted_by_measured.len(), 3);
+    assert!(y.predicted_by_command != y.predicted_by_measured, "{y:?}");
+    assert!(y.history_command_std >= 0.0 && y.real_std > 0.0, "{y:?}");
     // guidance 0 never looks at the terrain: exactly the same prediction
     assert_eq!(r.guidance["0"].terrain_distance, 0.0);
     assert!(r.guidance["1"].terrain_distance > 0.0);

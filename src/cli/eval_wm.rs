@@ -163,6 +163,29 @@ pub fn run(a: EvalWmArgs) -> Result<()> {
             ),
         }
     }
+    if let Some(y) = &r.yaw_response {
+        let row = |v: &[f64]| {
+            v.iter()
+                .map(|x| format!("{x:+.3}"))
+                .collect::<Vec<_>>()
+                .join(" | ")
+        };
+        println!(
+            "\nyaw response (rad/s; every history state's input set to {:?}, the same noise, {} windows):\n| input set | predicted yaw rate | slope |\n|---|---|---|\n| command | {} | {:.3} |\n| measured (gyro) | {} | {:.3} |\nthe windows as they are: command {:+.3} (std {:.3}), real {:+.3} (std {:.3}), predicted {:+.3}; the dataset's real on commanded yaw rate: slope {:.3}",
+            y.set_to,
+            y.windows,
+            row(&y.predicted_by_command),
+            y.command_slope,
+            row(&y.predicted_by_measured),
+            y.measured_slope,
+            y.history_command,
+            y.history_command_std,
+            y.real,
+            y.real_std,
+            y.predicted,
+            y.dataset_slope
+        );
+    }
     if let Some(p) = &r.plot {
         println!("\nplot: {p}");
     }

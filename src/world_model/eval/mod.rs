@@ -29,6 +29,11 @@
 //! * **Drift**: calls chained from the real history for 50 and 250 frames, the
 //!   scandots of each call read from the dataset at that call's anchor; windows
 //!   only from episodes long enough (none: `metrics` null and a `reason`).
+//! * **Yaw response** (G1 states, the config's sampling): the command's yaw
+//!   rate, then the measured one, set to -0.5, 0 and 0.5 rad/s in every history
+//!   state, the same noise: the plan's mean yaw rate for each and the slope
+//!   (1: the plan turns as that input says; 0: it ignores it), beside how
+//!   closely the dataset's own robots follow their command.
 //! * **Plot** (`--plot`): real and predicted joint positions of a few windows.
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -53,7 +58,7 @@ mod report;
 
 pub use report::{
     Drift, DriftMetrics, GuidanceScore, OneCall, SamplerScore, Sensitivity, ValidationInfo,
-    WmEvalReport,
+    WmEvalReport, YawResponse,
 };
 
 use episodes::{Pick, ValidationSet};
@@ -381,6 +386,12 @@ pub fn evaluate(checkpoint: &Path, opts: &WmEvalOptions) -> Result<WmEvalReport,
         );
     }
 
+    let yaw_response = if ctx.g1 {
+        Some(yaw_response(&ctx, &hist, &real, &scan, &sc, seed_a)?)
+    } else {
+        None
+    };
+
     // autoregressive drift
     let mut drift = BTreeMap::new();
     for &frames in &opts.drift_frames {
@@ -433,6 +444,7 @@ pub fn evaluate(checkpoint: &Path, opts: &WmEvalOptions) -> Result<WmEvalReport,
         samplers,
         terrain_sensitivity,
         drift,
+        yaw_response,
         notes,
         plot,
         wall_time_s: start.elapsed().as_secs_f64(),
@@ -521,5 +533,92 @@ fn drift_of(
             per_call_rmse,
         }),
         reason: None,
+    })
+}
+
+/// Yaw rates written into the history by [`yaw_response`] (rad/s).
+pub const YAW_RATES: [f64; 3] = [-0.5, 0.0, 0.5];
+
+/// Mean over windows and steps of one state entry `[B, T, D]` in raw units.
+fn mean_entry(x: &Tensor, i: usize, scale: f64) -> f64 {
+    x.narrow(2, i as i64, 1)
+        .mean(Kind::Double)
+        .double_value(&[])
+        / scale
+}
+
+/// Standard deviation of `x`.
+fn std_of(x: &[f64]) -> f64 {
+    let n = x.len().max(1) as f64;
+    let m = x.iter().sum::<f64>() / n;
+    (x.iter().map(|a| (a - m).powi(2)).sum::<f64>() / n).sqrt()
+}
+
+/// Least-squares slope of `y` on `x`.
+fn slope(x: &[f64], y: &[f64]) -> f64 {
+    let n = x.len().min(y.len()) as f64;
+    let (mx, my) = (x.iter().sum::<f64>() / n, y.iter().sum::<f64>() / n);
+    let sxy: f64 = x.iter().zip(y).map(|(a, b)| (a - mx) * (b - my)).sum();
+    let sxx: f64 = x.iter().map(|a| (a - mx).powi(2)).sum();
+    if sxx > 0.0 {
+        sxy / sxx
+    } else {
+        f64::NAN
+    }
+}
+
+/// The plan's yaw rate against the command's and the measured yaw rate in the
+/// history (see [`YawResponse`]).
+fn yaw_response(
+    ctx: &Ctx,
+    hist: &Tensor,
+    real: &Tensor,
+    scan: &Tensor,
+    sc: &SamplingConfig,
+    seed: u64,
+) -> Result<YawResponse, WmError> {
+    let sc_obs = crate::env::config::ObsScales::default();
+    let (cmd_i, gyro_i) = (obs::COMMAND.start + 2, obs::ANG_VEL.start + 2);
+    let (cmd_s, gyro_s) = (sc_obs.commands[2], sc_obs.ang_vel);
+    let by = |i: usize, scale: f64| -> Result<Vec<f64>, WmError> {
+        YAW_RATES
+            .iter()
+            .map(|&w| {
+                let h = hist.copy();
+                let _ = h.narrow(2, i as i64, 1).fill_(w * scale);
+                let p = ctx.predict(&h, scan, sc, seed)?;
+                Ok(mean_entry(&p, gyro_i, gyro_s))
+            })
+            .collect()
+    };
+    let predicted_by_command = by(cmd_i, cmd_s)?;
+    let predicted_by_measured = by(gyro_i, gyro_s)?;
+    let pred = ctx.predict(hist, scan, sc, seed)?;
+    // per window: commanded (history mean) against real (horizon mean)
+    let per = |x: &Tensor, i: usize, s: f64| -> Vec<f64> {
+        let v = x
+            .narrow(2, i as i64, 1)
+            .mean_dim([1i64, 2].as_slice(), false, Kind::Double)
+            .to_device(Device::Cpu);
+        Vec::<f64>::try_from(&v)
+            .unwrap_or_default()
+            .into_iter()
+            .map(|a| a / s)
+            .collect()
+    };
+    let (cmd, rl) = (per(hist, cmd_i, cmd_s), per(real, gyro_i, gyro_s));
+    Ok(YawResponse {
+        windows: hist.size()[0] as usize,
+        set_to: YAW_RATES.to_vec(),
+        command_slope: slope(&YAW_RATES, &predicted_by_command),
+        measured_slope: slope(&YAW_RATES, &predicted_by_measured),
+        predicted_by_command,
+        predicted_by_measured,
+        history_command: mean_entry(hist, cmd_i, cmd_s),
+        history_command_std: std_of(&cmd),
+        real_std: std_of(&rl),
+        real: mean_entry(real, gyro_i, gyro_s),
+        predicted: mean_entry(&pred, gyro_i, gyro_s),
+        dataset_slope: slope(&cmd, &rl),
     })
 }

@@ -145,8 +145,41 @@ pub struct WmEvalReport {
     pub terrain_sensitivity: BTreeMap<String, Sensitivity>,
     /// Keyed by frames (`"50"`, `"250"`).
     pub drift: BTreeMap<String, Drift>,
+    /// What steers the plan's turning: the yaw-rate command in the history or
+    /// the yaw rate the history measured (G1 states only).
+    pub yaw_response: Option<YawResponse>,
     /// How the terrain of shuffles and rollouts was chosen.
     pub notes: Vec<String>,
     pub plot: Option<String>,
     pub wall_time_s: f64,
+}
+
+/// The plan's yaw rate when one input of the history is set to each of a few
+/// yaw rates in every history state (the rest of each window as it was, the
+/// same noise): the command's yaw rate, or the measured one (gyro z). Rates in
+/// rad/s, read through the default observation scales.
+#[derive(Debug, Clone, Serialize)]
+pub struct YawResponse {
+    pub windows: usize,
+    /// The yaw rates written (rad/s).
+    pub set_to: Vec<f64>,
+    /// Mean predicted yaw rate over the horizon with the command set to each.
+    pub predicted_by_command: Vec<f64>,
+    /// The same with the measured yaw rate set to each (the command as it was).
+    pub predicted_by_measured: Vec<f64>,
+    /// Least-squares slope of predicted on set (1: the plan turns at the rate
+    /// written; 0: it ignores that input).
+    pub command_slope: f64,
+    pub measured_slope: f64,
+    /// The windows as they are: their mean commanded yaw rate in the history,
+    /// the mean real and predicted yaw rate over the horizon, and the slope of
+    /// the real yaw rate on the commanded one across windows (how closely the
+    /// dataset's robots follow the command).
+    pub history_command: f64,
+    /// Spread (std over windows) of the windows' commanded and real yaw rates.
+    pub history_command_std: f64,
+    pub real_std: f64,
+    pub real: f64,
+    pub predicted: f64,
+    pub dataset_slope: f64,
 }
