@@ -574,3 +574,33 @@ fn a_specialist_takes_no_inference_keys_and_is_no_world_model() {
     };
     assert!(e.contains("this is a policy checkpoint"), "{e}");
 }
+
+/// `eval.sample_actions` walks on actions sampled from the policy's Gaussian,
+/// as training acts: the same seed gives the same walks, and they are not the
+/// mean's.
+#[test]
+fn sampled_actions_are_seeded_and_are_not_the_mean() {
+    let run = |sets: &[&str]| {
+        let mut ck = Checkpoint::read(&common::walker_path()).unwrap();
+        let mut all = vec!["eval.lane_length=1.5".to_string(), "eval.n_envs=2".into()];
+        all.extend(sets.iter().map(|s| s.to_string()));
+        ck.set_eval(&all).unwrap();
+        evaluate(&ck, &opts(2)).unwrap()
+    };
+    let mean = run(&[]);
+    let a = run(&["eval.sample_actions=true"]);
+    let b = run(&["eval.sample_actions=true"]);
+    assert_eq!(a.vel_tracking_error, b.vel_tracking_error);
+    assert_eq!(a.completion_rate, b.completion_rate);
+    assert_ne!(a.vel_tracking_error, mean.vel_tracking_error);
+    let mut other = Checkpoint::read(&common::walker_path()).unwrap();
+    other
+        .set_eval(&[
+            "eval.lane_length=1.5".into(),
+            "eval.n_envs=2".into(),
+            "eval.sample_actions=true".into(),
+        ])
+        .unwrap();
+    let c = evaluate(&other, &EvalOptions { seed: 4, ..opts(2) }).unwrap();
+    assert_ne!(c.vel_tracking_error, a.vel_tracking_error);
+}

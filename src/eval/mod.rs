@@ -223,6 +223,9 @@ pub fn evaluate_in(
     env_cfg.validate()?;
     let length = cfg.eval.lane_length;
     let level = o.level.unwrap_or(cfg.eval.level);
+    if cfg.eval.sample_actions {
+        tch::manual_seed(o.seed as i64);
+    }
     let mut t = Tally::default();
     let mut per_lane = Vec::new();
     if o.terrain == TerrainKind::Flat {
@@ -436,7 +439,8 @@ fn run_episodes<T: EvalTask>(
 /// through its normalizers and history), or the world model of a controller
 /// checkpoint (the w/o-GCRL baseline, `task: no_gcrl`).
 enum Actor {
-    Policy(Box<Agent>),
+    /// The agent, and whether it samples its Gaussian (`eval.sample_actions`).
+    Policy(Box<Agent>, bool),
     WorldModel(Box<crate::baselines::no_gcrl::WmController>),
 }
 
@@ -457,14 +461,20 @@ impl Actor {
         ck.load_agent(&mut agent)?;
         agent.set_frozen(true);
         agent.reset_history(task);
-        Ok(Actor::Policy(Box::new(agent)))
+        Ok(Actor::Policy(Box::new(agent), cfg.eval.sample_actions))
     }
 
     /// One control step of `task`.
     fn step(&mut self, task: &mut dyn VecTask) {
         match self {
-            Actor::Policy(a) => {
+            Actor::Policy(a, false) => {
                 a.step_mean(task);
+            }
+            Actor::Policy(a, true) => {
+                a.prepare(&*task);
+                let act = a.act(true);
+                task.step(&act.actions);
+                a.after_step(&*task);
             }
             Actor::WorldModel(c) => {
                 c.step(task);
@@ -475,7 +485,7 @@ impl Actor {
     /// Env `i` was restarted by the evaluation (it reached the end line).
     fn restarted(&mut self, i: usize, obs: &[f32]) {
         match self {
-            Actor::Policy(a) => a.reset_history_env(i, obs),
+            Actor::Policy(a, _) => a.reset_history_env(i, obs),
             Actor::WorldModel(c) => c.reset_env(i, obs),
         }
     }

@@ -443,6 +443,10 @@ pub struct EvalConfig {
     /// checkpoint's `env.sim.hfield_contacts`); `surface_planes` gives the
     /// contacts every heightfield figure before 2026-12-04 was measured with.
     pub hfield_contacts: Option<crate::env::config::HfieldContacts>,
+    /// Act on actions sampled from the policy's Gaussian, as training does,
+    /// instead of its mean (false): what the exploration noise costs on the
+    /// same lanes (torch's generator seeded with the evaluation's seed).
+    pub sample_actions: bool,
 }
 
 impl Default for EvalConfig {
@@ -456,6 +460,7 @@ impl Default for EvalConfig {
             lanes: 1000,
             terrain: Default::default(),
             hfield_contacts: None,
+            sample_actions: false,
         }
     }
 }
