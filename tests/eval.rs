@@ -67,6 +67,14 @@ fn eval_counts_successes_time_outs_and_completion() {
         r.completion_rate
     );
     assert!(r.vel_tracking_error.is_finite() && r.vel_tracking_error > 0.0);
+    // yaw rates: the heading controller's command is clipped to +-1 rad/s,
+    // and the mean |error| bounds the |mean error|
+    assert!(r.yaw_rate_tracking_error.is_finite() && r.yaw_rate_tracking_error >= 0.0);
+    assert!(r.mean_commanded_yaw_rate.abs() <= 1.0, "{r:?}");
+    assert!(
+        r.yaw_rate_tracking_error + 1e-9 >= (r.mean_commanded_yaw_rate - r.mean_yaw_rate).abs(),
+        "{r:?}"
+    );
     assert!(
         (0.5..=1.0).contains(&r.mean_commanded_speed),
         "{}",
@@ -78,6 +86,9 @@ fn eval_counts_successes_time_outs_and_completion() {
         "completion_rate",
         "episodes",
         "vel_tracking_error",
+        "yaw_rate_tracking_error",
+        "mean_yaw_rate",
+        "mean_commanded_yaw_rate",
     ] {
         assert!(json.get(key).is_some(), "{key}");
     }

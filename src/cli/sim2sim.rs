@@ -328,6 +328,9 @@ fn stock_deployer(
         completion_rate: Some(comp / nf),
         mean_forward_speed: Some(speed / nf),
         vel_tracking_error: Some(err / nf),
+        // the stock deployer holds heading 0 and does not report yaw rates
+        yaw_rate_tracking_error: None,
+        mean_yaw_rate: None,
         falls: Some(falls),
         episodes: n,
         note: None,

@@ -32,6 +32,14 @@ pub struct EvalReport {
     pub vel_tracking_error: f64,
     pub falls: usize,
     pub timeouts: usize,
+    /// Mean |yaw-rate command - pelvis yaw rate| over every control step
+    /// (rad/s): how closely the heading controller's (or a cell's fixed)
+    /// yaw-rate command is followed.
+    pub yaw_rate_tracking_error: f64,
+    /// Mean commanded and actual pelvis yaw rate over every control step
+    /// (rad/s; positive turns left).
+    pub mean_commanded_yaw_rate: f64,
+    pub mean_yaw_rate: f64,
     /// Mean forward speed along the lane over all episodes (m/s).
     pub mean_forward_speed: f64,
     pub mean_commanded_speed: f64,
@@ -258,11 +266,10 @@ pub fn evaluate_in(
         episodes: t.done,
         success_rate: t.successes as f64 / d,
         completion_rate: t.completion / d,
-        vel_tracking_error: if t.err_n > 0 {
-            t.err_sum / t.err_n as f64
-        } else {
-            f64::NAN
-        },
+        vel_tracking_error: t.per_step(t.err_sum),
+        yaw_rate_tracking_error: t.per_step(t.yaw_err_sum),
+        mean_commanded_yaw_rate: t.per_step(t.yaw_cmd_sum),
+        mean_yaw_rate: t.per_step(t.yaw_rate_sum),
         falls: t.falls,
         timeouts: t.timeouts,
         mean_forward_speed: t.fwd_sum / d,
@@ -404,6 +411,9 @@ fn run_episodes<T: EvalTask>(
                     t.err_sum +=
                         (s.command[0] - s.base_lin_vel[0]).hypot(s.command[1] - s.base_lin_vel[1]);
                     t.err_n += 1;
+                    t.yaw_err_sum += (s.command[2] - s.base_ang_vel[2]).abs();
+                    t.yaw_cmd_sum += s.command[2];
+                    t.yaw_rate_sum += s.base_ang_vel[2];
                     speed[i] += s.base_lin_vel_world[0];
                     t.feet(s, &mut peak[i]);
                 }
@@ -566,6 +576,9 @@ struct Tally {
     completion: f64,
     err_sum: f64,
     err_n: u64,
+    yaw_err_sum: f64,
+    yaw_cmd_sum: f64,
+    yaw_rate_sum: f64,
     fwd_sum: f64,
     cmd_sum: f64,
     swing_sum: f64,
@@ -577,6 +590,15 @@ struct Tally {
 }
 
 impl Tally {
+    /// A sum over the counted control steps as a mean per step (NaN without one).
+    fn per_step(&self, sum: f64) -> f64 {
+        if self.err_n > 0 {
+            sum / self.err_n as f64
+        } else {
+            f64::NAN
+        }
+    }
+
     /// One step of the feet: a swing's peak is counted at its touchdown.
     fn feet(&mut self, s: &crate::env::state::EnvState, swing: &mut [Swing; 2]) {
         for (k, w) in swing.iter_mut().enumerate() {

@@ -148,6 +148,12 @@ pub struct CellResult {
     pub completion_rate: Option<f64>,
     pub mean_forward_speed: Option<f64>,
     pub vel_tracking_error: Option<f64>,
+    /// Mean |yaw-rate command - yaw rate| and mean yaw rate (rad/s; absent
+    /// from builds before 2026-12-05).
+    #[serde(default)]
+    pub yaw_rate_tracking_error: Option<f64>,
+    #[serde(default)]
+    pub mean_yaw_rate: Option<f64>,
     pub falls: Option<usize>,
     pub episodes: usize,
     pub note: Option<String>,
@@ -163,6 +169,8 @@ impl CellResult {
             completion_rate: Some(r.completion_rate),
             mean_forward_speed: Some(r.mean_forward_speed),
             vel_tracking_error: Some(r.vel_tracking_error),
+            yaw_rate_tracking_error: Some(r.yaw_rate_tracking_error),
+            mean_yaw_rate: Some(r.mean_yaw_rate),
             falls: Some(r.falls),
             episodes: r.episodes,
             note: None,
@@ -178,6 +186,8 @@ impl CellResult {
             completion_rate: None,
             mean_forward_speed: None,
             vel_tracking_error: None,
+            yaw_rate_tracking_error: None,
+            mean_yaw_rate: None,
             falls: None,
             episodes: 0,
             note: Some(note),
