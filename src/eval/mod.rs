@@ -231,9 +231,6 @@ pub fn evaluate_in(
     env_cfg.validate()?;
     let length = cfg.eval.lane_length;
     let level = o.level.unwrap_or(cfg.eval.level);
-    if cfg.eval.sample_actions {
-        tch::manual_seed(o.seed as i64);
-    }
     let mut t = Tally::default();
     let mut per_lane = Vec::new();
     if o.terrain == TerrainKind::Flat {
@@ -377,7 +374,9 @@ fn run_episodes<T: EvalTask>(
     t: &mut Tally,
 ) -> Result<(), RlError> {
     let n = task.n_envs();
-    let mut actor = Actor::of(ck, cfg, &*task)?;
+    // the env's seed (the evaluation's, per lane) seeds sampled actions too
+    let seed = task.loco().shared().cfg.seed;
+    let mut actor = Actor::of(ck, cfg, &*task, seed)?;
     let target = t.done + episodes;
 
     // env i runs a counted episode while counted[i]; new episodes are counted
@@ -449,14 +448,21 @@ fn run_episodes<T: EvalTask>(
 /// through its normalizers and history), or the world model of a controller
 /// checkpoint (the w/o-GCRL baseline, `task: no_gcrl`).
 enum Actor {
-    /// The agent, and whether it samples its Gaussian (`eval.sample_actions`).
-    Policy(Box<Agent>, bool),
+    /// The agent, and the generator of its Gaussian's samples when it acts on
+    /// them (`eval.sample_actions`; its own, so that parallel evaluations in
+    /// one process do not share torch's global generator).
+    Policy(Box<Agent>, Option<Box<rand_chacha::ChaCha8Rng>>),
     WorldModel(Box<crate::baselines::no_gcrl::WmController>),
 }
 
 impl Actor {
     /// The actor of `ck` for `task`'s envs, started on their current states.
-    fn of(ck: &Checkpoint, cfg: &ExperimentConfig, task: &dyn VecTask) -> Result<Actor, RlError> {
+    fn of(
+        ck: &Checkpoint,
+        cfg: &ExperimentConfig,
+        task: &dyn VecTask,
+        seed: u64,
+    ) -> Result<Actor, RlError> {
         if cfg.task == crate::rl::config::TaskKind::NoGcrl {
             let mut c = crate::baselines::no_gcrl::WmController::new(cfg, task.n_envs())?;
             c.reset_all(task);
@@ -471,19 +477,31 @@ impl Actor {
         ck.load_agent(&mut agent)?;
         agent.set_frozen(true);
         agent.reset_history(task);
-        Ok(Actor::Policy(Box::new(agent), cfg.eval.sample_actions))
+        let sampler = cfg.eval.sample_actions.then(|| {
+            use rand::SeedableRng;
+            Box::new(rand_chacha::ChaCha8Rng::seed_from_u64(seed))
+        });
+        Ok(Actor::Policy(Box::new(agent), sampler))
     }
 
     /// One control step of `task`.
     fn step(&mut self, task: &mut dyn VecTask) {
         match self {
-            Actor::Policy(a, false) => {
+            Actor::Policy(a, None) => {
                 a.step_mean(task);
             }
-            Actor::Policy(a, true) => {
+            Actor::Policy(a, Some(rng)) => {
+                use rand_distr::{Distribution, StandardNormal};
                 a.prepare(&*task);
-                let act = a.act(true);
-                task.step(&act.actions);
+                let mut actions = a.act_mean();
+                let std: Vec<f32> = Vec::<f32>::try_from(&a.policy.std().to_kind(tch::Kind::Float))
+                    .unwrap_or_default();
+                let k = std.len().max(1);
+                for (j, x) in actions.iter_mut().enumerate() {
+                    let z: f32 = StandardNormal.sample(&mut **rng);
+                    *x += std.get(j % k).copied().unwrap_or(0.0) * z;
+                }
+                task.step(&actions);
                 a.after_step(&*task);
             }
             Actor::WorldModel(c) => {
