@@ -448,11 +448,18 @@ fn run_episodes<T: EvalTask>(
 /// through its normalizers and history), or the world model of a controller
 /// checkpoint (the w/o-GCRL baseline, `task: no_gcrl`).
 enum Actor {
-    /// The agent, and the generator of its Gaussian's samples when it acts on
-    /// them (`eval.sample_actions`; its own, so that parallel evaluations in
-    /// one process do not share torch's global generator).
-    Policy(Box<Agent>, Option<Box<rand_chacha::ChaCha8Rng>>),
+    /// The agent, and its Gaussian's sampler when it acts on samples
+    /// (`eval.sample_actions`).
+    Policy(Box<Agent>, Option<Box<Sampler>>),
     WorldModel(Box<crate::baselines::no_gcrl::WmController>),
+}
+
+/// Gaussian action samples for `eval.sample_actions`: a generator of its own
+/// (parallel evaluations in one process do not share torch's global one) and
+/// the frozen policy's std.
+struct Sampler {
+    rng: rand_chacha::ChaCha8Rng,
+    std: Vec<f32>,
 }
 
 impl Actor {
@@ -477,10 +484,18 @@ impl Actor {
         ck.load_agent(&mut agent)?;
         agent.set_frozen(true);
         agent.reset_history(task);
-        let sampler = cfg.eval.sample_actions.then(|| {
+        let sampler = if cfg.eval.sample_actions {
             use rand::SeedableRng;
-            Box::new(rand_chacha::ChaCha8Rng::seed_from_u64(seed))
-        });
+            // the frozen policy's std, read once
+            let std = Vec::<f32>::try_from(&agent.policy.std().to_kind(tch::Kind::Float))
+                .map_err(|e| RlError::Invalid(format!("the policy's action std: {e}")))?;
+            Some(Box::new(Sampler {
+                rng: rand_chacha::ChaCha8Rng::seed_from_u64(seed),
+                std,
+            }))
+        } else {
+            None
+        };
         Ok(Actor::Policy(Box::new(agent), sampler))
     }
 
@@ -490,16 +505,14 @@ impl Actor {
             Actor::Policy(a, None) => {
                 a.step_mean(task);
             }
-            Actor::Policy(a, Some(rng)) => {
+            Actor::Policy(a, Some(smp)) => {
                 use rand_distr::{Distribution, StandardNormal};
                 a.prepare(&*task);
                 let mut actions = a.act_mean();
-                let std: Vec<f32> = Vec::<f32>::try_from(&a.policy.std().to_kind(tch::Kind::Float))
-                    .unwrap_or_default();
-                let k = std.len().max(1);
-                for (j, x) in actions.iter_mut().enumerate() {
-                    let z: f32 = StandardNormal.sample(&mut **rng);
-                    *x += std.get(j % k).copied().unwrap_or(0.0) * z;
+                // one std per action dimension, the same for every env
+                for (x, sd) in actions.iter_mut().zip(smp.std.iter().cycle()) {
+                    let z: f32 = StandardNormal.sample(&mut smp.rng);
+                    *x += sd * z;
                 }
                 task.step(&actions);
                 a.after_step(&*task);

@@ -445,7 +445,8 @@ pub struct EvalConfig {
     pub hfield_contacts: Option<crate::env::config::HfieldContacts>,
     /// Act on actions sampled from the policy's Gaussian, as training does,
     /// instead of its mean (false): what the exploration noise costs on the
-    /// same lanes (torch's generator seeded with the evaluation's seed).
+    /// same lanes (a generator of its own, seeded per lane from the evaluation's
+    /// seed).
     pub sample_actions: bool,
 }
 

@@ -598,13 +598,8 @@ fn yaw_response(
     let per = |x: &Tensor, i: usize, s: f64| -> Vec<f64> {
         let v = x
             .narrow(2, i as i64, 1)
-            .mean_dim([1i64, 2].as_slice(), false, Kind::Double)
-            .to_device(Device::Cpu);
-        Vec::<f64>::try_from(&v)
-            .unwrap_or_default()
-            .into_iter()
-            .map(|a| a / s)
-            .collect()
+            .mean_dim([1i64, 2].as_slice(), false, Kind::Double);
+        to_vec(&v).into_iter().map(|a| a / s).collect()
     };
     let (cmd, rl) = (per(hist, cmd_i, cmd_s), per(real, gyro_i, gyro_s));
     Ok(YawResponse {
