@@ -104,6 +104,58 @@ fn curriculum_promotes_walkers_and_demotes_fallers() {
 }
 
 #[test]
+fn a_fall_remembers_the_condition_that_ended_it() {
+    use dreampolicy::env::FallCause;
+    // on its side in the air: tilted (before anything touches)
+    let c = cfg(&["env.n_envs=2"]);
+    let mut v = VecEnv::new(&c.env).unwrap();
+    let zeros = vec![0.0f32; 2 * NUM_JOINTS];
+    v.step(&zeros);
+    teleport(&mut v, 0, 0.0, 0.7, true);
+    v.step(&zeros);
+    assert!(v.outcomes[0].terminated && !v.outcomes[1].episode_done);
+    assert_eq!(v.envs()[0].last_episode_end().fall, Some(FallCause::Tilt));
+    // dropped on its side with the tilt and height conditions off (the full
+    // collision set gives the pelvis and torso their geoms): a contact ends it
+    let c = cfg(&[
+        "env.n_envs=1",
+        "env.sim.collision=full",
+        "env.termination.max_tilt_deg=179",
+        "env.termination.min_base_height=0",
+    ]);
+    let mut v = VecEnv::new(&c.env).unwrap();
+    v.step(&zeros[..NUM_JOINTS]);
+    teleport(&mut v, 0, 0.0, 0.3, true);
+    let fell = (0..100).any(|_| {
+        v.step(&zeros[..NUM_JOINTS]);
+        v.outcomes[0].terminated
+    });
+    assert!(fell, "lying on the ground without a contact end");
+    assert_eq!(
+        v.envs()[0].last_episode_end().fall,
+        Some(FallCause::Contact)
+    );
+    // an upright pelvis below termination.min_base_height
+    let c = cfg(&["env.n_envs=1", "env.termination.min_base_height=2.0"]);
+    let mut v = VecEnv::new(&c.env).unwrap();
+    v.step(&zeros[..NUM_JOINTS]);
+    assert!(v.outcomes[0].terminated);
+    assert_eq!(
+        v.envs()[0].last_episode_end().fall,
+        Some(FallCause::BaseHeight)
+    );
+    // a truncation is not a fall
+    let c = cfg(&["env.n_envs=1"]);
+    let mut v = VecEnv::new(&c.env).unwrap();
+    v.step(&zeros[..NUM_JOINTS]);
+    let x = v.envs()[0].state().base_pos[0];
+    teleport(&mut v, 0, 0.5 - x, 0.8, false);
+    v.step(&zeros[..NUM_JOINTS]);
+    assert!(v.outcomes[0].truncated);
+    assert_eq!(v.envs()[0].last_episode_end().fall, None);
+}
+
+#[test]
 fn leaving_the_map_truncates_without_terminating() {
     let c = cfg(&["env.n_envs=2"]);
     let mut v = VecEnv::new(&c.env).unwrap();

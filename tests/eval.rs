@@ -35,6 +35,45 @@ fn opts(episodes: usize) -> EvalOptions {
 }
 
 #[test]
+fn eval_reports_what_ended_the_falls() {
+    // a pelvis never 2 m above the ground: every walk falls on its first step,
+    // by the base-height condition (of the training scene: the full-collision
+    // scene has the default terminations)
+    let dir = Scratch::new("eval-falls");
+    let ck = tiny_checkpoint(
+        &dir,
+        &["env.termination.min_base_height=2.0", "eval.n_envs=3"],
+    );
+    let o = EvalOptions {
+        full_collision: false,
+        ..opts(5)
+    };
+    let r = evaluate(&ck, &o).unwrap();
+    assert_eq!((r.episodes, r.falls), (5, 5));
+    let c = r.fall_causes;
+    assert_eq!((c.base_height, c.tilt, c.contact), (5, 0, 0), "{c:?}");
+    assert!(
+        r.falls_mean_distance.abs() < 0.05,
+        "{}",
+        r.falls_mean_distance
+    );
+    assert!((0.5..=1.0).contains(&r.falls_mean_commanded_speed), "{r:?}");
+    // no counted step before a first-step fall: no precursor, no full window
+    let p = r.fall_precursors;
+    assert!((p.window_s - 1.0).abs() < 1e-9);
+    for row in [p.straddle, p.stumble, p.flight] {
+        assert_eq!((row.before_fall, row.second_before_fall), (0.0, 0.0));
+        assert!(row.any_window.is_nan());
+    }
+    // walks that do not fall: no causes, NaN fall means
+    let dir2 = Scratch::new("eval-falls2");
+    let ck = tiny_checkpoint(&dir2, &["eval.lane_length=0.001", "eval.n_envs=2"]);
+    let r = evaluate(&ck, &opts(2)).unwrap();
+    assert_eq!(r.fall_causes, dreampolicy::eval::FallCauses::default());
+    assert!(r.falls_mean_distance.is_nan() && r.falls_mean_commanded_speed.is_nan());
+}
+
+#[test]
 fn eval_counts_successes_time_outs_and_completion() {
     let dir = Scratch::new("eval");
     // a 1 mm lane: every episode reaches the end line on its first step

@@ -63,6 +63,22 @@ pub struct EpisodeEnd {
     pub base_pos: [f64; 3],
     pub spawn: [f64; 3],
     pub command: [f64; 3],
+    /// What ended it when it was a fall (None: a time-out, the map's edge, a
+    /// blow-up or a reset from outside).
+    pub fall: Option<FallCause>,
+}
+
+/// The termination condition that ended an episode as a fall, the first that
+/// holds in this order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FallCause {
+    /// A `termination.contact_bodies` body touched the ground.
+    Contact,
+    /// The pelvis tilted past `termination.max_tilt_deg`.
+    Tilt,
+    /// The pelvis sank below `termination.min_base_height` above the terrain.
+    BaseHeight,
 }
 
 /// Where one env writes its outputs (its rows of the batch buffers).
@@ -340,9 +356,16 @@ impl LocoEnv {
         // terminations and truncations
         let t = &sh.cfg.termination;
         let s = &mut self.state;
-        let fell = s.base_height < t.min_base_height
-            || -s.gravity[2] < sh.cos_max_tilt
-            || self.fatal_contact;
+        let cause = if self.fatal_contact {
+            Some(FallCause::Contact)
+        } else if -s.gravity[2] < sh.cos_max_tilt {
+            Some(FallCause::Tilt)
+        } else if s.base_height < t.min_base_height {
+            Some(FallCause::BaseHeight)
+        } else {
+            None
+        };
+        let fell = cause.is_some();
         s.terminated = fell;
         let timeout = self.step_in_episode >= sh.max_episode_steps;
         let off_map = sh.scene.terrain.as_ref().is_some_and(|m| {
@@ -376,6 +399,7 @@ impl LocoEnv {
             self.update_curriculum(sh);
             self.last_sums.copy_from_slice(&self.episode_sums);
             self.remember_end();
+            self.last_end.fall = cause;
             self.reset(sh);
         }
         self.write_obs(sh, out.obs, out.critic, out.scan);
@@ -395,6 +419,7 @@ impl LocoEnv {
             base_pos: self.state.base_pos,
             spawn: self.spawn,
             command: self.state.command,
+            fall: None,
         };
     }
 

@@ -13,7 +13,7 @@ pub mod state;
 pub mod task;
 mod vec_env;
 
-pub use locomotion::{EpisodeEnd, LocoEnv};
+pub use locomotion::{EpisodeEnd, FallCause, LocoEnv};
 pub use scene::Scene;
 pub use state::EnvState;
 pub use vec_env::{StepInfo, VecEnv};

@@ -32,6 +32,16 @@ pub struct EvalReport {
     pub vel_tracking_error: f64,
     pub falls: usize,
     pub timeouts: usize,
+    /// The falls by the termination condition that ended them.
+    pub fall_causes: FallCauses,
+    /// Mean commanded speed (m/s) and mean distance along the lane (m) of the
+    /// walks that fell (NaN without a fall): whether the falls come with the
+    /// fast commands, and where on the lane.
+    pub falls_mean_commanded_speed: f64,
+    pub falls_mean_distance: f64,
+    /// What the feet did in the second before each fall, beside how often the
+    /// same happens in any second of the counted walks.
+    pub fall_precursors: FallPrecursors,
     /// Mean |yaw-rate command - pelvis yaw rate| over every control step
     /// (rad/s): how closely the heading controller's (or a cell's fixed)
     /// yaw-rate command is followed.
@@ -101,6 +111,50 @@ pub struct EvalReport {
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub per_lane: Vec<LaneResult>,
 }
+
+/// Falls counted by [`FallCause`] (`contact`: a `termination.contact_bodies`
+/// body on the ground; `tilt`: the pelvis past `termination.max_tilt_deg`;
+/// `base_height`: the pelvis below `termination.min_base_height`).
+#[derive(Debug, Clone, Copy, Default, Serialize, PartialEq, Eq)]
+pub struct FallCauses {
+    pub contact: usize,
+    pub tilt: usize,
+    pub base_height: usize,
+}
+
+/// Foot events before the falls: for each, the fraction of falls with one in
+/// the [`PRECURSOR_STEPS`] control steps before the fall (`before_fall`; a
+/// fall's own stumbles and hops are in it), the fraction with one in the
+/// window before that (`second_before_fall`, from `2 window_s` to `window_s`
+/// before the fall: what happened before balance was lost), and the fraction
+/// of all consecutive windows of as many counted steps that hold one
+/// (`any_window`, the base rate to read both against; NaN without a fall or a
+/// full window).
+#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+pub struct FallPrecursors {
+    pub window_s: f64,
+    /// A foot in contact across a step's edge (the `feet_straddle` reward's
+    /// condition: the terrain under the sole's corners spans more than
+    /// `straddle_height`).
+    pub straddle: Precursor,
+    /// A foot's horizontal contact force above 4 times its vertical one
+    /// (`feet_stumble`'s condition: a toe against a riser or a block's side).
+    pub stumble: Precursor,
+    /// Neither foot on the ground (a hop).
+    pub flight: Precursor,
+}
+
+/// One row of [`FallPrecursors`].
+#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+pub struct Precursor {
+    pub before_fall: f64,
+    pub second_before_fall: f64,
+    pub any_window: f64,
+}
+
+/// Control steps of a [`FallPrecursors`] window (1 s at 50 Hz; two fit the
+/// 128-bit history kept per walk).
+pub const PRECURSOR_STEPS: u32 = 50;
 
 /// One lane of an evaluation.
 #[derive(Debug, Clone, Serialize, PartialEq)]
@@ -269,6 +323,10 @@ pub fn evaluate_in(
         mean_yaw_rate: t.per_step(t.yaw_rate_sum),
         falls: t.falls,
         timeouts: t.timeouts,
+        fall_causes: t.causes,
+        falls_mean_commanded_speed: t.fall_cmd_sum / t.falls as f64,
+        falls_mean_distance: t.fall_dist_sum / t.falls as f64,
+        fall_precursors: t.precursors(env_cfg.sim.control_dt()),
         mean_forward_speed: t.fwd_sum / d,
         mean_commanded_speed: t.cmd_sum / d,
         swing_peak_height: t.swing_sum / t.swings as f64,
@@ -385,6 +443,7 @@ fn run_episodes<T: EvalTask>(
     let mut counted: Vec<bool> = (0..n).map(|i| i < started).collect();
     let (mut steps, mut speed) = (vec![0u64; n], vec![0.0f64; n]);
     let mut peak = vec![[Swing::default(); 2]; n];
+    let mut watch = vec![Watch::default(); n];
     while t.done < target {
         actor.step(task);
         for i in 0..n {
@@ -394,6 +453,9 @@ fn run_episodes<T: EvalTask>(
                 // the env has reset: the episode's end is what it remembered
                 let last = e.last_episode_end();
                 let dist = last.base_pos[0] - last.spawn[0];
+                if counted[i] && out.terminated {
+                    t.fell(last.fall, dist, last.command[0], &watch[i]);
+                }
                 Some((
                     if out.terminated {
                         Ending::Fall
@@ -415,6 +477,7 @@ fn run_episodes<T: EvalTask>(
                     t.yaw_rate_sum += s.base_ang_vel[2];
                     speed[i] += s.base_lin_vel_world[0];
                     t.feet(s, &mut peak[i]);
+                    t.watch(s, &mut watch[i]);
                 }
                 let dist = s.base_pos[0] - e.spawn()[0];
                 (dist >= length).then_some((Ending::Success, length, s.command[0]))
@@ -435,6 +498,7 @@ fn run_episodes<T: EvalTask>(
             steps[i] = 0;
             speed[i] = 0.0;
             peak[i] = [Swing::default(); 2];
+            watch[i] = Watch::default();
             if end == Ending::Success {
                 task.restart(i);
                 actor.restarted(i, task.obs());
@@ -618,9 +682,92 @@ struct Tally {
     stance_n: u64,
     rise_sum: f64,
     rises: u64,
+    causes: FallCauses,
+    fall_cmd_sum: f64,
+    fall_dist_sum: f64,
+    /// Full windows of [`PRECURSOR_STEPS`] counted steps, and those holding
+    /// each foot event (straddle, stumble, flight).
+    windows: u64,
+    window_hits: [u64; 3],
+    /// Falls with each foot event in the window before them, and in the
+    /// window before that.
+    fall_hits: [u64; 3],
+    fall_hits_earlier: [u64; 3],
+}
+
+/// The foot events of one env's walk in progress: for each event, a bit per
+/// counted step, the newest lowest (the last 2 [`PRECURSOR_STEPS`]), and the
+/// events of the current window.
+#[derive(Debug, Clone, Copy, Default)]
+struct Watch {
+    recent: [u128; 3],
+    window: [bool; 3],
+    window_steps: u64,
+}
+
+/// This step's foot events: a straddling foothold, a stumble, a flight.
+fn foot_events(s: &crate::env::state::EnvState) -> [bool; 3] {
+    let straddle = (0..2).any(|k| s.feet_contact[k] && s.feet_straddle[k]);
+    let stumble = s
+        .feet_force
+        .iter()
+        .any(|f| f[0].hypot(f[1]) > 4.0 * f[2].abs());
+    let flight = !s.feet_contact[0] && !s.feet_contact[1];
+    [straddle, stumble, flight]
 }
 
 impl Tally {
+    /// One counted step of an env's walk: its foot events.
+    fn watch(&mut self, s: &crate::env::state::EnvState, w: &mut Watch) {
+        let ev = foot_events(s);
+        for j in 0..3 {
+            w.recent[j] = (w.recent[j] << 1) | ev[j] as u128;
+            w.window[j] |= ev[j];
+        }
+        w.window_steps += 1;
+        if w.window_steps == PRECURSOR_STEPS as u64 {
+            self.windows += 1;
+            for j in 0..3 {
+                self.window_hits[j] += w.window[j] as u64;
+            }
+            w.window = [false; 3];
+            w.window_steps = 0;
+        }
+    }
+
+    /// A counted walk fell.
+    fn fell(&mut self, cause: Option<crate::env::FallCause>, dist: f64, cmd: f64, w: &Watch) {
+        use crate::env::FallCause;
+        match cause {
+            Some(FallCause::Contact) => self.causes.contact += 1,
+            Some(FallCause::Tilt) => self.causes.tilt += 1,
+            // a fall is one of the three; count an unknown one as the last
+            Some(FallCause::BaseHeight) | None => self.causes.base_height += 1,
+        }
+        self.fall_cmd_sum += cmd;
+        self.fall_dist_sum += dist;
+        let window = (1u128 << PRECURSOR_STEPS) - 1;
+        for j in 0..3 {
+            self.fall_hits[j] += (w.recent[j] & window != 0) as u64;
+            self.fall_hits_earlier[j] += ((w.recent[j] >> PRECURSOR_STEPS) & window != 0) as u64;
+        }
+    }
+
+    /// The precursor table of the falls so far.
+    fn precursors(&self, control_dt: f64) -> FallPrecursors {
+        let row = |j: usize| Precursor {
+            before_fall: self.fall_hits[j] as f64 / self.falls as f64,
+            second_before_fall: self.fall_hits_earlier[j] as f64 / self.falls as f64,
+            any_window: self.window_hits[j] as f64 / self.windows as f64,
+        };
+        FallPrecursors {
+            window_s: PRECURSOR_STEPS as f64 * control_dt,
+            straddle: row(0),
+            stumble: row(1),
+            flight: row(2),
+        }
+    }
+
     /// A sum over the counted control steps as a mean per step (NaN without one).
     fn per_step(&self, sum: f64) -> f64 {
         if self.err_n > 0 {
