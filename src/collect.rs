@@ -94,6 +94,13 @@ pub struct CollectConfig {
     /// Envs start at levels uniform in `0..=max_level` (clamped to the map's top;
     /// `None` = every level).
     pub max_level: Option<usize>,
+    /// The commands every specialist is given (an `env.commands` block, every
+    /// key of it), instead of its training ones; `None` keeps each
+    /// checkpoint's. The specialists train with the heading held along their
+    /// lanes, so their own commands put almost no turns into the dataset:
+    /// `{heading_command: false, ang_vel_yaw: [-1, 1], ...}` asks for them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub commands: Option<crate::env::config::CommandConfig>,
     /// Physics threads.
     pub threads: usize,
     /// libtorch threads.
@@ -117,6 +124,7 @@ impl Default for CollectConfig {
             domain_rand: true,
             observation_noise: false,
             max_level: None,
+            commands: None,
             threads: 2,
             torch_threads: 1,
             seed: 0,
@@ -176,6 +184,26 @@ impl CollectConfig {
         if let Some(t) = self.episode_length_s {
             if !(t.is_finite() && t > 0.0) {
                 return bad(format!("episode_length_s must be > 0, got {t}"));
+            }
+        }
+        if let Some(c) = &self.commands {
+            for (what, r) in [
+                ("lin_vel_x", c.lin_vel_x),
+                ("lin_vel_y", c.lin_vel_y),
+                ("ang_vel_yaw", c.ang_vel_yaw),
+                ("heading", c.heading),
+            ] {
+                if !(r[0] <= r[1]) {
+                    return bad(format!(
+                        "commands.{what} must be [lo, hi] with lo <= hi, got {r:?}"
+                    ));
+                }
+            }
+            if !(c.resample_time_s > 0.0) {
+                return bad(format!(
+                    "commands.resample_time_s must be > 0, got {}",
+                    c.resample_time_s
+                ));
             }
         }
         if self.chunk_bytes < 4096 {
@@ -375,6 +403,9 @@ fn collect_shard(
     }
     env_cfg.domain_rand.enabled &= cfg.domain_rand;
     env_cfg.observation.add_noise &= cfg.observation_noise;
+    if let Some(c) = &cfg.commands {
+        env_cfg.commands = c.clone();
+    }
     env_cfg.terrain.curriculum = false;
     if env_cfg.terrain.mode == TerrainMode::Map {
         let top = env_cfg.terrain.map.max_level();

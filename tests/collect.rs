@@ -204,3 +204,38 @@ fn collect_starts_each_specialist_at_its_own_levels() {
         "levels 0-2: x spread {config_wide} m"
     );
 }
+
+/// `commands` replaces every specialist's training commands: a fixed yaw-rate
+/// command (heading mode off) is the one every recorded state holds.
+#[test]
+fn collect_gives_the_config_commands_instead_of_the_training_ones() {
+    use dreampolicy::env::obs::COMMAND;
+    let dir = Scratch::new("collect-commands");
+    let flat = tiny_policy(&dir, "flat", &[]);
+    let text = format!(
+        "specialists:\n  - {{terrain: flat, checkpoint: {}}}\n\
+         n_envs: 2\nepisodes_per_env: 1\nrounds: 1\nepisode_length_s: 0.2\nthreads: 1\n\
+         commands: {{heading_command: false, lin_vel_x: [0.6, 0.6], lin_vel_y: [0.0, 0.0], \
+         ang_vel_yaw: [0.7, 0.7], min_norm: 0.0}}\n",
+        flat.display()
+    );
+    let out = dir.0.join("dataset");
+    collect(&config(&text), &text, &out, true).unwrap();
+    let ck = dreampolicy::rl::checkpoint::Checkpoint::read(&flat).unwrap();
+    let scales = ck.config().unwrap().env.observation.scales.commands;
+    let mut n = 0;
+    for f in Dataset::open(&out, Default::default()).unwrap().frames() {
+        let f = f.unwrap().1;
+        let cmd = &f.state[COMMAND];
+        assert!((cmd[0] as f64 - 0.6 * scales[0]).abs() < 1e-5, "{cmd:?}");
+        assert!((cmd[2] as f64 - 0.7 * scales[2]).abs() < 1e-5, "{cmd:?}");
+        n += 1;
+    }
+    assert!(n > 0);
+    // a range that runs backwards is refused at load
+    let bad = text.replace("[0.7, 0.7]", "[1.0, -1.0]");
+    let e = CollectConfig::from_str(&bad, "test", &[])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("commands.ang_vel_yaw"), "{e}");
+}
