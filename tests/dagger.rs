@@ -174,6 +174,20 @@ fn a_dagger_run_resumes_and_eval_reads_its_student() {
     assert!(header.contains("imitation_loss") && header.ends_with("action_error_stair"));
     assert_eq!(metrics.lines().count(), 5, "{metrics}");
     assert!(run.join("plots/training.png").exists());
+    // `dreampolicy plot` redraws a DAgger run's own curves (not the PPO panels,
+    // whose columns it does not have)
+    std::fs::remove_file(run.join("plots/training.png")).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_dreampolicy"))
+        .arg("plot")
+        .arg(&run)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(run.join("plots/training.png").exists());
     // the student is an ordinary G1 policy checkpoint
     let ck = Checkpoint::read(&run.join("checkpoints/latest.pt")).unwrap();
     assert_eq!(ck.meta.iteration, 4);

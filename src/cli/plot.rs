@@ -1,18 +1,46 @@
 //! `dreampolicy plot`: a run directory's training curves from its metrics.csv.
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 
 /// Arguments of `plot`.
 #[derive(clap::Args)]
 pub struct PlotArgs {
-    /// Run directory.
+    /// Run directory (any trainer's: PPO, unified, the baselines, world model).
     run: PathBuf,
 }
 
+/// Which trainer wrote a run's `metrics.csv`, read from its columns: each
+/// trainer draws its own panels.
+#[derive(Debug, PartialEq, Eq)]
+enum Curves {
+    /// PPO: specialists, the unified policy, w/o diffusion (shared columns).
+    Ppo,
+    Dagger,
+    WorldModel,
+}
+
+fn curves_of(run: &Path) -> Result<Curves> {
+    let path = run.join("metrics.csv");
+    let text = std::fs::read_to_string(&path)
+        .with_context(|| format!("reading {} (is this a run directory?)", path.display()))?;
+    let header: Vec<&str> = text.lines().next().unwrap_or("").split(',').collect();
+    Ok(if header.contains(&"imitation_loss") {
+        Curves::Dagger
+    } else if header.contains(&"val_loss") {
+        Curves::WorldModel
+    } else {
+        Curves::Ppo
+    })
+}
+
 pub fn run(a: PlotArgs) -> Result<()> {
-    let out = dreampolicy::rl::runner::plot_run(&a.run)
-        .with_context(|| format!("plotting {}", a.run.display()))?;
+    let out = match curves_of(&a.run)? {
+        Curves::Ppo => dreampolicy::rl::runner::plot_run(&a.run),
+        Curves::Dagger => dreampolicy::baselines::dagger::plot_run(&a.run),
+        Curves::WorldModel => dreampolicy::world_model::trainer::plot_run(&a.run),
+    }
+    .with_context(|| format!("plotting {}", a.run.display()))?;
     println!("{}", out.display());
     Ok(())
 }
