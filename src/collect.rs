@@ -193,13 +193,13 @@ impl CollectConfig {
                 ("ang_vel_yaw", c.ang_vel_yaw),
                 ("heading", c.heading),
             ] {
-                if !(r[0] <= r[1]) {
+                if r[0].is_nan() || r[1].is_nan() || r[0] > r[1] {
                     return bad(format!(
                         "commands.{what} must be [lo, hi] with lo <= hi, got {r:?}"
                     ));
                 }
             }
-            if !(c.resample_time_s > 0.0) {
+            if c.resample_time_s.is_nan() || c.resample_time_s <= 0.0 {
                 return bad(format!(
                     "commands.resample_time_s must be > 0, got {}",
                     c.resample_time_s
