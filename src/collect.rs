@@ -187,18 +187,7 @@ impl CollectConfig {
             }
         }
         if let Some(c) = &self.commands {
-            for (what, r) in [
-                ("lin_vel_x", c.lin_vel_x),
-                ("lin_vel_y", c.lin_vel_y),
-                ("ang_vel_yaw", c.ang_vel_yaw),
-                ("heading", c.heading),
-            ] {
-                if r[0].is_nan() || r[1].is_nan() || r[0] > r[1] {
-                    return bad(format!(
-                        "commands.{what} must be [lo, hi] with lo <= hi, got {r:?}"
-                    ));
-                }
-            }
+            c.check_ranges("commands").map_err(CollectError::Invalid)?;
             if c.resample_time_s.is_nan() || c.resample_time_s <= 0.0 {
                 return bad(format!(
                     "commands.resample_time_s must be > 0, got {}",

@@ -177,15 +177,10 @@ fn a_dagger_run_resumes_and_eval_reads_its_student() {
     // `dreampolicy plot` redraws a DAgger run's own curves (not the PPO panels,
     // whose columns it does not have)
     std::fs::remove_file(run.join("plots/training.png")).unwrap();
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_dreampolicy"))
-        .arg("plot")
-        .arg(&run)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    common::run_ok(
+        std::process::Command::new(env!("CARGO_BIN_EXE_dreampolicy"))
+            .arg("plot")
+            .arg(&run),
     );
     assert!(run.join("plots/training.png").exists());
     // the student is an ordinary G1 policy checkpoint

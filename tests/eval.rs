@@ -51,7 +51,11 @@ fn eval_reports_what_ended_the_falls() {
     let r = evaluate(&ck, &o).unwrap();
     assert_eq!((r.episodes, r.falls), (5, 5));
     let c = r.fall_causes;
-    assert_eq!((c.base_height, c.tilt, c.contact), (5, 0, 0), "{c:?}");
+    assert_eq!(
+        (c.base_height, c.tilt, c.contact, c.blowup),
+        (5, 0, 0, 0),
+        "{c:?}"
+    );
     assert!(
         r.falls_mean_distance.abs() < 0.05,
         "{}",

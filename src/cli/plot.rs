@@ -21,10 +21,14 @@ enum Curves {
 }
 
 fn curves_of(run: &Path) -> Result<Curves> {
+    use std::io::BufRead;
     let path = run.join("metrics.csv");
-    let text = std::fs::read_to_string(&path)
+    let mut first = String::new();
+    std::fs::File::open(&path)
+        .map(std::io::BufReader::new)
+        .and_then(|mut f| f.read_line(&mut first))
         .with_context(|| format!("reading {} (is this a run directory?)", path.display()))?;
-    let header: Vec<&str> = text.lines().next().unwrap_or("").split(',').collect();
+    let header: Vec<&str> = first.trim_end().split(',').collect();
     Ok(if header.contains(&"imitation_loss") {
         Curves::Dagger
     } else if header.contains(&"val_loss") {

@@ -295,6 +295,26 @@ pub struct CommandConfig {
     pub lane_lookahead: Option<f64>,
 }
 
+impl CommandConfig {
+    /// Each command range is `[lo, hi]` with `lo <= hi` (no NaN); the error
+    /// names the range as `{prefix}.{key}`.
+    pub fn check_ranges(&self, prefix: &str) -> Result<(), String> {
+        for (what, r) in [
+            ("lin_vel_x", self.lin_vel_x),
+            ("lin_vel_y", self.lin_vel_y),
+            ("ang_vel_yaw", self.ang_vel_yaw),
+            ("heading", self.heading),
+        ] {
+            if r[0].is_nan() || r[1].is_nan() || r[0] > r[1] {
+                return Err(format!(
+                    "{prefix}.{what} must be [lo, hi] with lo <= hi, got {r:?}"
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
 impl Default for CommandConfig {
     fn default() -> Self {
         CommandConfig {
@@ -471,11 +491,10 @@ impl EnvConfig {
             }
         }
         self.rewards.validate()?;
+        self.commands
+            .check_ranges("env.commands")
+            .map_err(ConfigError::Invalid)?;
         for (what, r) in [
-            ("commands.lin_vel_x", self.commands.lin_vel_x),
-            ("commands.lin_vel_y", self.commands.lin_vel_y),
-            ("commands.ang_vel_yaw", self.commands.ang_vel_yaw),
-            ("commands.heading", self.commands.heading),
             ("init.yaw", self.init.yaw),
             ("domain_rand.friction", self.domain_rand.friction),
             ("domain_rand.added_mass", self.domain_rand.added_mass),

@@ -193,12 +193,28 @@ fn stance_roll(i: usize, p: &RewardParams) -> f64 {
     }
 }
 
-fn feet_stumble(s: &EnvState, _: &RewardParams) -> f64 {
-    let stumble = s
-        .feet_force
+/// A foot's horizontal contact force is above 4 times its vertical one (a toe
+/// against a riser or a block's side): `feet_stumble`'s condition.
+pub fn stumbling(s: &EnvState) -> bool {
+    s.feet_force
         .iter()
-        .any(|f| f[0].hypot(f[1]) > 4.0 * f[2].abs());
-    stumble as u8 as f64
+        .any(|f| f[0].hypot(f[1]) > 4.0 * f[2].abs())
+}
+
+/// Feet in contact across a step's edge: `feet_straddle`'s count.
+pub fn feet_straddling(s: &EnvState) -> usize {
+    (0..2)
+        .filter(|&i| s.feet_contact[i] && s.feet_straddle[i])
+        .count()
+}
+
+/// Neither foot on the ground: `feet_flight`'s condition.
+pub fn in_flight(s: &EnvState) -> bool {
+    !s.feet_contact[0] && !s.feet_contact[1]
+}
+
+fn feet_stumble(s: &EnvState, _: &RewardParams) -> f64 {
+    stumbling(s) as u8 as f64
 }
 
 fn feet_edge(s: &EnvState, p: &RewardParams) -> f64 {
@@ -217,13 +233,11 @@ fn feet_gap(s: &EnvState, _: &RewardParams) -> f64 {
 }
 
 fn feet_straddle(s: &EnvState, _: &RewardParams) -> f64 {
-    (0..2)
-        .filter(|&i| s.feet_contact[i] && s.feet_straddle[i])
-        .count() as f64
+    feet_straddling(s) as f64
 }
 
 fn feet_flight(s: &EnvState, _: &RewardParams) -> f64 {
-    (!s.feet_contact[0] && !s.feet_contact[1]) as u8 as f64
+    in_flight(s) as u8 as f64
 }
 
 fn feet_parallel(s: &EnvState, _: &RewardParams) -> f64 {

@@ -114,12 +114,15 @@ pub struct EvalReport {
 
 /// Falls counted by [`FallCause`] (`contact`: a `termination.contact_bodies`
 /// body on the ground; `tilt`: the pelvis past `termination.max_tilt_deg`;
-/// `base_height`: the pelvis below `termination.min_base_height`).
+/// `base_height`: the pelvis below `termination.min_base_height`), and
+/// `blowup`: the physics went unstable (the env ends the episode as a
+/// termination without a condition).
 #[derive(Debug, Clone, Copy, Default, Serialize, PartialEq, Eq)]
 pub struct FallCauses {
     pub contact: usize,
     pub tilt: usize,
     pub base_height: usize,
+    pub blowup: usize,
 }
 
 /// Foot events before the falls: for each, the fraction of falls with one in
@@ -705,15 +708,11 @@ struct Watch {
     window_steps: u64,
 }
 
-/// This step's foot events: a straddling foothold, a stumble, a flight.
+/// This step's foot events: a straddling foothold, a stumble, a flight (the
+/// conditions of the rewards of the same names).
 fn foot_events(s: &crate::env::state::EnvState) -> [bool; 3] {
-    let straddle = (0..2).any(|k| s.feet_contact[k] && s.feet_straddle[k]);
-    let stumble = s
-        .feet_force
-        .iter()
-        .any(|f| f[0].hypot(f[1]) > 4.0 * f[2].abs());
-    let flight = !s.feet_contact[0] && !s.feet_contact[1];
-    [straddle, stumble, flight]
+    use crate::env::rewards::{feet_straddling, in_flight, stumbling};
+    [feet_straddling(s) > 0, stumbling(s), in_flight(s)]
 }
 
 impl Tally {
@@ -741,8 +740,8 @@ impl Tally {
         match cause {
             Some(FallCause::Contact) => self.causes.contact += 1,
             Some(FallCause::Tilt) => self.causes.tilt += 1,
-            // a fall is one of the three; count an unknown one as the last
-            Some(FallCause::BaseHeight) | None => self.causes.base_height += 1,
+            Some(FallCause::BaseHeight) => self.causes.base_height += 1,
+            None => self.causes.blowup += 1,
         }
         self.fall_cmd_sum += cmd;
         self.fall_dist_sum += dist;
