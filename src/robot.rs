@@ -135,8 +135,9 @@ pub const HIP_ROLL_YAW: [usize; 4] = [1, 2, 7, 8];
 pub const LEG_HIP_PITCH: usize = 0;
 pub const LEG_KNEE: usize = 3;
 pub const LEG_ANKLE_PITCH: usize = 4;
-/// Offsets of hip roll and ankle roll within a leg's six joints.
+/// Offsets of hip roll, hip yaw and ankle roll within a leg's six joints.
 pub const LEG_HIP_ROLL: usize = 1;
+pub const LEG_HIP_YAW: usize = 2;
 pub const LEG_ANKLE_ROLL: usize = 5;
 /// Waist and arm joints (canonical indices).
 pub const UPPER_BODY: std::ops::Range<usize> = 12..NUM_JOINTS;

@@ -168,8 +168,21 @@ fn a_dagger_run_resumes_and_eval_reads_its_student() {
     let mut more = cfg.clone();
     more.train.iterations = 4;
     let s = dagger::train(&more, &run, true, true).unwrap();
-    assert_eq!((s.iterations, s.env_steps), (4, 128));
+    // the resume refilled the aggregate to the 64 transitions it held at 2
+    // (64 env-steps, counted) before its first update, then 2 iterations
+    assert_eq!((s.iterations, s.env_steps), (4, 192));
+    let log = std::fs::read_to_string(run.join("log.txt")).unwrap();
+    assert!(
+        log.contains("refilled the aggregated dataset to 64 transitions"),
+        "{log}"
+    );
     let metrics = std::fs::read_to_string(run.join("metrics.csv")).unwrap();
+    let last = metrics.lines().last().unwrap();
+    let header: Vec<&str> = metrics.lines().next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let fields: Vec<&str> = last.split(',').collect();
+    assert_eq!(fields[col("buffer_size")].parse::<f64>().unwrap(), 128.0);
+    assert_eq!(fields[col("env_steps")].parse::<f64>().unwrap(), 192.0);
     let header = metrics.lines().next().unwrap();
     assert!(header.contains("imitation_loss") && header.ends_with("action_error_stair"));
     assert_eq!(metrics.lines().count(), 5, "{metrics}");

@@ -369,6 +369,20 @@ fn foot_lifting_terms_by_hand() {
     s.q[3] += 1.0;
     close(term("ref_joint_pos", &s), (-2.6f64).exp() - 0.1);
 
+    // a turn's hip yaw: counted by default, left out with ref_free_hip_yaw
+    s.q[..12].copy_from_slice(&q_w);
+    s.q[2] += 0.3; // left hip yaw
+    s.q[8] -= 0.4; // right hip yaw
+    close(term("ref_joint_pos", &s), (-1.0f64).exp() - 0.1);
+    let free_yaw = RewardParams {
+        ref_free_hip_yaw: true,
+        ..p.clone()
+    };
+    let ref_term = |s: &EnvState, p: &RewardParams| (lookup("ref_joint_pos").unwrap().f)(s, p);
+    close(ref_term(&s, &free_yaw), 1.0);
+    s.q[3] += 0.3; // the knee still counts
+    close(ref_term(&s, &free_yaw), (-0.6f64).exp() - 0.06);
+
     // standing still while commanded to move
     s.command = [0.8, 0.0, 0.0];
     s.base_lin_vel = [0.1, 0.0, 0.0];

@@ -13,8 +13,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::config::ConfigError;
 use crate::robot::{
-    HIP_ROLL_YAW, LEG_ANKLE_PITCH, LEG_ANKLE_ROLL, LEG_HIP_PITCH, LEG_HIP_ROLL, LEG_KNEE,
-    NUM_JOINTS, UPPER_BODY,
+    HIP_ROLL_YAW, LEG_ANKLE_PITCH, LEG_ANKLE_ROLL, LEG_HIP_PITCH, LEG_HIP_ROLL, LEG_HIP_YAW,
+    LEG_KNEE, NUM_JOINTS, UPPER_BODY,
 };
 
 /// One reward term.
@@ -74,7 +74,7 @@ terms! {
     upright: "exp(-(g_x^2 + g_y^2) / upright_sigma): a bounded, positive orientation term (mjlab's upright)";
     feet_air_time_biped: "while exactly one foot is in contact and |v_cmd| > 0.1: min(time both feet have spent in their current mode, feet_air_time_threshold) (Isaac Lab's G1 feet_air_time_positive_biped)";
     foot_clearance: "exp(-sum_feet tanh(2 |v_xy(foot)|) (z_foot - ground - foot_clearance_target)^2 / clearance_sigma): only a foot that moves is asked to be high (Isaac Lab's velocity-weighted clearance)";
-    ref_joint_pos: "exp(-2 d) - 0.2 min(d, 0.5), d = ||q_legs - q_ref|| over the 12 leg joints; q_ref is the default pose (hip and ankle roll turned by ref_stance_roll) plus, in each leg's clock swing, hip pitch -A sin(pi s), knee +2A sin(pi s), ankle pitch -A sin(pi s) (A = ref_swing_amplitude: the foot lifts and stays level; humanoid-gym's reference trajectory)";
+    ref_joint_pos: "exp(-2 d) - 0.2 min(d, 0.5), d = ||q_legs - q_ref|| over the 12 leg joints; q_ref is the default pose (hip and ankle roll turned by ref_stance_roll) plus, in each leg's clock swing, hip pitch -A sin(pi s), knee +2A sin(pi s), ankle pitch -A sin(pi s) (A = ref_swing_amplitude: the foot lifts and stays level; humanoid-gym's reference trajectory); ref_free_hip_yaw leaves the hip yaw joints out of d";
     stand_still: "1 while a planar command of |v_cmd| > 0.2 m/s is given and the base moves along it at less than a quarter of it: standing in front of an obstacle must not pay";
     energy: "sum((tau_j qd_j / k_j)^2), k_j the joint's effort limit (the paper's energy consumption; its k_j is read as the effort limit, 0 without one)";
     dof_vel_limits: "sum(max(0, |qd_j| - 0.9 qd_max_j)), qd_max_j the motor's no-load speed (Unitree's specs)";
@@ -480,7 +480,14 @@ pub fn reference_leg_pose(s: &EnvState, p: &RewardParams) -> [f64; 12] {
 
 fn ref_joint_pos(s: &EnvState, p: &RewardParams) -> f64 {
     let q_ref = reference_leg_pose(s, p);
-    let d = norm(q_ref.iter().zip(&s.q[..12]).map(|(r, q)| q - r));
+    let d = norm(
+        q_ref
+            .iter()
+            .zip(&s.q[..12])
+            .enumerate()
+            .filter(|(i, _)| !(p.ref_free_hip_yaw && i % 6 == LEG_HIP_YAW))
+            .map(|(_, (r, q))| q - r),
+    );
     (-2.0 * d).exp() - 0.2 * d.min(0.5)
 }
 
@@ -641,6 +648,12 @@ pub struct RewardParams {
     /// so the sole stays level. The feet come in by about 0.65 m x r each (0:
     /// the default pose's 0.24 m between the ankles).
     pub ref_stance_roll: f64,
+    /// Leave the hip yaw joints out of `ref_joint_pos`'s distance. A turn
+    /// rotates the pelvis over a planted foot, so the stance hip yaw drifts by
+    /// the turn rate times the stance time (0.44 rad a stance at 1 rad/s and a
+    /// 0.8 s gait): a reference that holds it at the default pose pays against
+    /// every turn (`hip_pos` still keeps it near the default).
+    pub ref_free_hip_yaw: bool,
 }
 
 impl Default for RewardParams {
@@ -665,6 +678,7 @@ impl Default for RewardParams {
             swing_clock_height: 0.10,
             ref_swing_amplitude: 0.3,
             ref_stance_roll: 0.0,
+            ref_free_hip_yaw: false,
         }
     }
 }
