@@ -177,13 +177,12 @@ fn a_dagger_run_resumes_and_eval_reads_its_student() {
         "{log}"
     );
     let metrics = std::fs::read_to_string(run.join("metrics.csv")).unwrap();
-    let last = metrics.lines().last().unwrap();
-    let header: Vec<&str> = metrics.lines().next().unwrap().split(',').collect();
-    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
-    let fields: Vec<&str> = last.split(',').collect();
+    let header = metrics.lines().next().unwrap();
+    let names: Vec<&str> = header.split(',').collect();
+    let col = |name: &str| names.iter().position(|h| *h == name).unwrap();
+    let fields: Vec<&str> = metrics.lines().last().unwrap().split(',').collect();
     assert_eq!(fields[col("buffer_size")].parse::<f64>().unwrap(), 128.0);
     assert_eq!(fields[col("env_steps")].parse::<f64>().unwrap(), 192.0);
-    let header = metrics.lines().next().unwrap();
     assert!(header.contains("imitation_loss") && header.ends_with("action_error_stair"));
     assert_eq!(metrics.lines().count(), 5, "{metrics}");
     assert!(run.join("plots/training.png").exists());

@@ -27,10 +27,8 @@
 //! aggregated dataset is not saved (hundreds of MB): a resume first refills it,
 //! stepping the mixture of its iteration without updating the student, to as
 //! many transitions as it held when the checkpoint was written
-//! ([`Dagger::refill`]; the env-steps count). Without the refill the first
-//! updates after a resume fit a few thousand fresh states 20 times an
-//! iteration, and the student forgets: measured, 600 -> 1 200 dropped stairs
-//! and gaps from 0.40/0.20 to 0.00/0.00.
+//! ([`Dagger::refill`]; the env-steps count), so that the first updates after
+//! a resume do not fit a few thousand fresh states 20 times an iteration.
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Instant;
