@@ -66,6 +66,12 @@ pub struct SpecialistSource {
     /// at its own level.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_level: Option<usize>,
+    /// This specialist's commands (an `env.commands` block, every key of it),
+    /// instead of the config's `commands` (or, without either, its training
+    /// ones): turn commands for the experts that turn, the lane's heading for
+    /// those that do not.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub commands: Option<crate::env::config::CommandConfig>,
 }
 
 /// `configs/collect/*.yaml`.
@@ -186,11 +192,22 @@ impl CollectConfig {
                 return bad(format!("episode_length_s must be > 0, got {t}"));
             }
         }
-        if let Some(c) = &self.commands {
-            c.check_ranges("commands").map_err(CollectError::Invalid)?;
+        let per_specialist = self.specialists.iter().filter_map(|s| {
+            s.commands
+                .as_ref()
+                .map(|c| (format!("specialists[{}].commands", s.terrain), c))
+        });
+        for (key, c) in self
+            .commands
+            .as_ref()
+            .map(|c| ("commands".to_string(), c))
+            .into_iter()
+            .chain(per_specialist)
+        {
+            c.check_ranges(&key).map_err(CollectError::Invalid)?;
             if c.resample_time_s.is_nan() || c.resample_time_s <= 0.0 {
                 return bad(format!(
-                    "commands.resample_time_s must be > 0, got {}",
+                    "{key}.resample_time_s must be > 0, got {}",
                     c.resample_time_s
                 ));
             }
@@ -324,7 +341,10 @@ pub fn collect(
                 })?;
             }
             let max_level = spec.max_level.or(cfg.max_level);
-            let s = collect_shard(cfg, ck, kind, max_level, shard, round, dir, &info, quiet)?;
+            let commands = spec.commands.as_ref().or(cfg.commands.as_ref());
+            let s = collect_shard(
+                cfg, ck, kind, max_level, commands, shard, round, dir, &info, quiet,
+            )?;
             shards.push(s);
         }
     }
@@ -372,6 +392,7 @@ fn collect_shard(
     ck: &Checkpoint,
     kind: TerrainKind,
     max_level: Option<usize>,
+    commands: Option<&crate::env::config::CommandConfig>,
     shard: u32,
     round: usize,
     dir: &Path,
@@ -392,7 +413,7 @@ fn collect_shard(
     }
     env_cfg.domain_rand.enabled &= cfg.domain_rand;
     env_cfg.observation.add_noise &= cfg.observation_noise;
-    if let Some(c) = &cfg.commands {
+    if let Some(c) = commands {
         env_cfg.commands = c.clone();
     }
     env_cfg.terrain.curriculum = false;

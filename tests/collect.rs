@@ -206,7 +206,8 @@ fn collect_starts_each_specialist_at_its_own_levels() {
 }
 
 /// `commands` replaces every specialist's training commands: a fixed yaw-rate
-/// command (heading mode off) is the one every recorded state holds.
+/// command (heading mode off) is the one every recorded state holds; a
+/// specialist's own `commands` replaces the config's.
 #[test]
 fn collect_gives_the_config_commands_instead_of_the_training_ones() {
     use dreampolicy::env::obs::COMMAND;
@@ -238,4 +239,30 @@ fn collect_gives_the_config_commands_instead_of_the_training_ones() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("commands.ang_vel_yaw"), "{e}");
+
+    // a specialist's own `commands` wins over the config's
+    let own = text.replace(
+        &format!("checkpoint: {}}}", flat.display()),
+        &format!(
+            "checkpoint: {}, commands: {{heading_command: false, lin_vel_x: [0.5, 0.5], \
+             lin_vel_y: [0.0, 0.0], ang_vel_yaw: [-0.4, -0.4], min_norm: 0.0}}}}",
+            flat.display()
+        ),
+    );
+    assert_ne!(own, text);
+    let out = dir.0.join("dataset-own");
+    collect(&config(&own), &own, &out, true).unwrap();
+    let mut n = 0;
+    for f in Dataset::open(&out, Default::default()).unwrap().frames() {
+        let cmd = f.unwrap().1.state[COMMAND].to_vec();
+        assert!((cmd[0] as f64 - 0.5 * scales[0]).abs() < 1e-5, "{cmd:?}");
+        assert!((cmd[2] as f64 + 0.4 * scales[2]).abs() < 1e-5, "{cmd:?}");
+        n += 1;
+    }
+    assert!(n > 0);
+    let bad = own.replace("[-0.4, -0.4]", "[1.0, -1.0]");
+    let e = CollectConfig::from_str(&bad, "test", &[])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("specialists[flat].commands.ang_vel_yaw"), "{e}");
 }

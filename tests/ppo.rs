@@ -498,6 +498,34 @@ fn walker_transfers_into_a_scan_encoder_policy_acting_the_same() {
         "{v_old:?} {v_new:?}"
     );
 
+    // a specialist's scan encoders grow too, their latent included: the new
+    // latent units enter the actor and critic through zero columns
+    let spec_ck = Checkpoint::read(&run.checkpoint).unwrap();
+    let mut spec = Agent::new(&explore.policy, env.dims(), n, true);
+    spec_ck.load_agent(&mut spec).unwrap();
+    let mut sets_wide: Vec<&str> = sets.to_vec();
+    sets_wide.push("policy.scan_encoder.dims=[24,12]");
+    sets_wide.push("policy.actor_hidden=[48,40]");
+    let wide_scan = load_config("test/g1_tiny.yaml", &sets_wide);
+    let mut grown = Agent::new(&wide_scan.policy, env.dims(), n, true);
+    let t = spec_ck.transfer_agent(&mut grown).unwrap();
+    for name in [
+        "actor.0.weight",
+        "critic.0.weight",
+        "scan_actor.0.weight",
+        "scan_actor.1.weight",
+        "scan_critic.1.bias",
+    ] {
+        assert!(t.grown.iter().any(|g| g == name), "{name}: {t}");
+    }
+    common::assert_acts_alike(&mut spec, &mut grown, &mut env, 3);
+    let (critic, scan) = (env.critic(), env.scan());
+    let (v_old, v_new) = (spec.values_of(critic, scan), grown.values_of(critic, scan));
+    assert!(
+        common::max_abs_diff(&v_old, &v_new) < 1e-5,
+        "{v_old:?} {v_new:?}"
+    );
+
     // other architecture changes are refused, naming the tensor
     let narrow = load_config("test/g1_tiny.yaml", &["policy.actor_hidden=[16,32]"]);
     let mut agent = Agent::new(&narrow.policy, env.dims(), n, true);

@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 use tch::{Kind, Tensor};
 
 use super::agent::Agent;
+use super::config::ScanEncoderKind;
 use super::normalizer::RunningNorm;
 use super::optim::Adam;
 use super::RlError;
@@ -92,8 +93,9 @@ pub struct Transfer {
     pub widened: Vec<String>,
     /// Scan-encoder tensors left at their fresh initialization.
     pub fresh: Vec<String>,
-    /// Actor and critic layers grown to wider hidden sizes (the old units
-    /// copied, the new units' outgoing weights zero).
+    /// Actor, critic and scan-encoder layers grown to wider hidden sizes or a
+    /// wider scan latent (the old units copied, the new units' outgoing weights
+    /// zero).
     pub grown: Vec<String>,
 }
 
@@ -109,11 +111,7 @@ impl std::fmt::Display for Transfer {
         if self.grown.is_empty() {
             return Ok(());
         }
-        write!(
-            f,
-            ", grown to wider hidden layers: [{}]",
-            self.grown.join(", ")
-        )
+        write!(f, ", grown to wider layers: [{}]", self.grown.join(", "))
     }
 }
 
@@ -398,7 +396,9 @@ impl Checkpoint {
     /// actor's and critic's hidden layers may also be wider than the source's
     /// (Net2Net): the old units are copied, the new units' incoming weights keep
     /// their fresh initialization and their outgoing weights start at zero, so
-    /// that the wider policy too acts as the old one at first. Any other
+    /// that the wider policy too acts as the old one at first. An MLP scan
+    /// encoder may grow the same way, its latent included: the new latent units
+    /// enter the actor's and critic's first layers through zero columns. Any other
     /// difference is an error naming the tensor.
     pub fn transfer_agent(&self, agent: &mut Agent) -> Result<Transfer, RlError> {
         let src_cfg = self.config()?;
@@ -426,6 +426,15 @@ impl Checkpoint {
         } else {
             0
         };
+        // a scan encoder with a wider latent than the source's (MLP encoders
+        // only): the new latent units enter the actor and critic through zero
+        // columns at the end of the scan block
+        let src_se = &src_cfg.policy.scan_encoder;
+        let new_se = &agent.policy.cfg.scan_encoder;
+        let mlp = |k: ScanEncoderKind| k == ScanEncoderKind::Mlp;
+        let latent_grows = (src_scan && scan_out > 0 && mlp(src_se.kind) && mlp(new_se.kind))
+            .then(|| (src_se.latent(), scan_out - src_se.latent()))
+            .filter(|&(_, d)| d > 0);
         let mut report = Transfer::default();
         for (name, mut var) in agent.policy.named_parameters() {
             let Some(src) = self.file.tensor(&format!("policy.{name}")).ok() else {
@@ -447,9 +456,33 @@ impl Checkpoint {
                 "critic.0.weight" => Some(0),
                 _ => None,
             };
-            // a wider actor or critic (Net2Net): the old units in the leading
-            // block, the new units' incoming weights fresh and their outgoing
-            // weights zero, so that the policy acts as the old one at first
+            // the first layer of a policy whose scan latent grew: zero columns
+            // for the new latent units (and, if the layer is wider too, its new
+            // rows fresh, as below)
+            if let (Some(off), Some((_, d))) = (offset, latent_grows) {
+                let off = if name == "actor.0.weight" {
+                    off
+                } else {
+                    src_se.latent()
+                };
+                if ss.len() == 2 && ns.len() == 2 && ns[1] == ss[1] + d && ns[0] >= ss[0] {
+                    tch::no_grad(|| {
+                        let zeros = Tensor::zeros([ss[0], d], (src.kind(), src.device()));
+                        let rest = ss[1] - off;
+                        let w = Tensor::cat(
+                            &[src.narrow(1, 0, off), zeros, src.narrow(1, off, rest)],
+                            1,
+                        );
+                        var.narrow(0, 0, ss[0]).copy_(&w);
+                    });
+                    report.grown.push(name);
+                    continue;
+                }
+            }
+            // a wider actor, critic or scan encoder (Net2Net): the old units
+            // in the leading block, the new units' incoming weights fresh and
+            // their outgoing weights zero, so that the policy acts as the old
+            // one at first
             if grows(&name, &ss, &ns) {
                 tch::no_grad(|| {
                     if ns.len() == 2 {
@@ -546,10 +579,14 @@ impl Checkpoint {
     }
 }
 
-/// Whether `name` is a layer of the actor or critic MLP that grows from `old`
-/// to `new` (as many dims, none smaller, the input of a first layer unchanged).
+/// Whether `name` is a layer of the actor, critic or an MLP scan encoder that
+/// grows from `old` to `new` (as many dims, none smaller, the input of a first
+/// layer unchanged).
 fn grows(name: &str, old: &[i64], new: &[i64]) -> bool {
-    (name.starts_with("actor.") || name.starts_with("critic."))
+    (name.starts_with("actor.")
+        || name.starts_with("critic.")
+        || name.starts_with("scan_actor.")
+        || name.starts_with("scan_critic."))
         && old.len() == new.len()
         && !old.is_empty()
         && old.iter().zip(new).all(|(o, n)| n >= o)
