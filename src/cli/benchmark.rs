@@ -26,6 +26,7 @@ pub struct BenchmarkArgs {
 
 pub fn run(a: BenchmarkArgs) -> Result<()> {
     let cfg = BenchmarkConfig::load(&a.config, &a.sets)?;
+    tch::set_num_threads(cfg.threads.max(1) as i32);
     let out = a.out.clone().unwrap_or_else(|| {
         let stem = a
             .config

@@ -136,6 +136,10 @@ pub(super) fn checkpoint_name(path: &Path) -> String {
 }
 
 pub fn run(a: EvalArgs) -> Result<()> {
+    // libtorch's own default is a thread per core, whose spinning OpenMP team
+    // made two 100-walk evaluations side by side at `--threads 1` take more
+    // than 20 min each on a 2-core machine, against 2.3 min with one thread
+    tch::set_num_threads(a.threads.max(1) as i32);
     let kinds = a
         .terrain
         .iter()

@@ -91,6 +91,7 @@ fn matrix(a: &Sim2SimArgs) -> Result<Sim2SimConfig> {
 }
 
 pub fn run(a: Sim2SimArgs) -> Result<()> {
+    tch::set_num_threads(a.threads.max(1) as i32);
     let c = matrix(&a)?;
     let mut ck = Checkpoint::read(&a.checkpoint)?;
     ck.set_eval(&a.sets)?;
