@@ -526,6 +526,20 @@ fn walker_transfers_into_a_scan_encoder_policy_acting_the_same() {
         "{v_old:?} {v_new:?}"
     );
 
+    // a longer MLP history (oldest first): the older states enter through
+    // zero columns, so the policy still acts on its last states alone
+    let k = spec.policy.history_len();
+    assert!(k > 0, "g1_tiny has an MLP history");
+    let longer = format!("policy.history.length={}", 3 * k);
+    let mut sets_long: Vec<&str> = sets.to_vec();
+    sets_long.push(&longer);
+    let long_cfg = load_config("test/g1_tiny.yaml", &sets_long);
+    let mut long = Agent::new(&long_cfg.policy, env.dims(), n, true);
+    let t = spec_ck.transfer_agent(&mut long).unwrap();
+    assert!(t.grown.iter().any(|g| g == "hist.0.weight"), "{t}");
+    assert_eq!(long.policy.history_len(), 3 * k);
+    common::assert_acts_alike(&mut spec, &mut long, &mut env, 3);
+
     // other architecture changes are refused, naming the tensor
     let narrow = load_config("test/g1_tiny.yaml", &["policy.actor_hidden=[16,32]"]);
     let mut agent = Agent::new(&narrow.policy, env.dims(), n, true);

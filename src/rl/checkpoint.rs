@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 use tch::{Kind, Tensor};
 
 use super::agent::Agent;
-use super::config::ScanEncoderKind;
+use super::config::{HistoryKind, ScanEncoderKind};
 use super::normalizer::RunningNorm;
 use super::optim::Adam;
 use super::RlError;
@@ -398,7 +398,9 @@ impl Checkpoint {
     /// their fresh initialization and their outgoing weights start at zero, so
     /// that the wider policy too acts as the old one at first. An MLP scan
     /// encoder may grow the same way, its latent included: the new latent units
-    /// enter the actor's and critic's first layers through zero columns. Any other
+    /// enter the actor's and critic's first layers through zero columns; so may
+    /// an MLP history encoder, and its history may be longer: the older states
+    /// it adds enter through zero columns. Any other
     /// difference is an error naming the tensor.
     pub fn transfer_agent(&self, agent: &mut Agent) -> Result<Transfer, RlError> {
         let src_cfg = self.config()?;
@@ -456,6 +458,27 @@ impl Checkpoint {
                 "critic.0.weight" => Some(0),
                 _ => None,
             };
+            // a longer MLP history: the history is oldest first, so the new
+            // (older) states enter through zero columns in front of the old ones
+            if name == "hist.0.weight"
+                && src_cfg.policy.history.kind == HistoryKind::Mlp
+                && agent.policy.cfg.history.kind == HistoryKind::Mlp
+                && ss.len() == 2
+                && ns.len() == 2
+                && ns[0] >= ss[0]
+                && ns[1] > ss[1]
+                && ss[1] % dims.obs as i64 == 0
+                && ns[1] % dims.obs as i64 == 0
+            {
+                tch::no_grad(|| {
+                    let _ = var.zero_();
+                    var.narrow(0, 0, ss[0])
+                        .narrow(1, ns[1] - ss[1], ss[1])
+                        .copy_(src);
+                });
+                report.grown.push(name);
+                continue;
+            }
             // the first layer of a policy whose scan latent grew: zero columns
             // for the new latent units (and, if the layer is wider too, its new
             // rows fresh, as below)
@@ -507,7 +530,7 @@ impl Checkpoint {
                 return Err(err(
                     &self.path,
                     format!(
-                        "tensor '{name}' has shape {ss:?}, the configured policy needs {ns:?}: only the scan encoders may be added and the actor's or critic's hidden layers widened (history and encoders must match)"
+                        "tensor '{name}' has shape {ss:?}, the configured policy needs {ns:?}: only the scan encoders may be added, the actor's, critic's and MLP encoders' layers widened and an MLP history lengthened"
                     ),
                 ));
             };
@@ -579,12 +602,13 @@ impl Checkpoint {
     }
 }
 
-/// Whether `name` is a layer of the actor, critic or an MLP scan encoder that
-/// grows from `old` to `new` (as many dims, none smaller, the input of a first
+/// Whether `name` is a layer of the actor, critic or an MLP history or scan
+/// encoder that grows from `old` to `new` (as many dims, none smaller, the input of a first
 /// layer unchanged).
 fn grows(name: &str, old: &[i64], new: &[i64]) -> bool {
     (name.starts_with("actor.")
         || name.starts_with("critic.")
+        || (name.starts_with("hist.") && name[5..].starts_with(|c: char| c.is_ascii_digit()))
         || name.starts_with("scan_actor.")
         || name.starts_with("scan_critic."))
         && old.len() == new.len()
