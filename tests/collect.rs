@@ -224,15 +224,19 @@ fn collect_gives_the_config_commands_instead_of_the_training_ones() {
     collect(&config(&text), &text, &out, true).unwrap();
     let ck = dreampolicy::rl::checkpoint::Checkpoint::read(&flat).unwrap();
     let scales = ck.config().unwrap().env.observation.scales.commands;
-    let mut n = 0;
-    for f in Dataset::open(&out, Default::default()).unwrap().frames() {
-        let f = f.unwrap().1;
-        let cmd = &f.state[COMMAND];
-        assert!((cmd[0] as f64 - 0.6 * scales[0]).abs() < 1e-5, "{cmd:?}");
-        assert!((cmd[2] as f64 - 0.7 * scales[2]).abs() < 1e-5, "{cmd:?}");
-        n += 1;
-    }
-    assert!(n > 0);
+    // every recorded state holds the forward speed `vx` and yaw rate `yaw`
+    let holds = |out: &std::path::Path, vx: f64, yaw: f64| {
+        let mut n = 0;
+        for f in Dataset::open(out, Default::default()).unwrap().frames() {
+            let f = f.unwrap().1;
+            let cmd = &f.state[COMMAND];
+            assert!((cmd[0] as f64 - vx * scales[0]).abs() < 1e-5, "{cmd:?}");
+            assert!((cmd[2] as f64 - yaw * scales[2]).abs() < 1e-5, "{cmd:?}");
+            n += 1;
+        }
+        assert!(n > 0);
+    };
+    holds(&out, 0.6, 0.7);
     // a range that runs backwards is refused at load
     let bad = text.replace("[0.7, 0.7]", "[1.0, -1.0]");
     let e = CollectConfig::from_str(&bad, "test", &[])
@@ -252,14 +256,7 @@ fn collect_gives_the_config_commands_instead_of_the_training_ones() {
     assert_ne!(own, text);
     let out = dir.0.join("dataset-own");
     collect(&config(&own), &own, &out, true).unwrap();
-    let mut n = 0;
-    for f in Dataset::open(&out, Default::default()).unwrap().frames() {
-        let cmd = f.unwrap().1.state[COMMAND].to_vec();
-        assert!((cmd[0] as f64 - 0.5 * scales[0]).abs() < 1e-5, "{cmd:?}");
-        assert!((cmd[2] as f64 + 0.4 * scales[2]).abs() < 1e-5, "{cmd:?}");
-        n += 1;
-    }
-    assert!(n > 0);
+    holds(&out, 0.5, -0.4);
     let bad = own.replace("[-0.4, -0.4]", "[1.0, -1.0]");
     let e = CollectConfig::from_str(&bad, "test", &[])
         .unwrap_err()

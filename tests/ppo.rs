@@ -491,12 +491,7 @@ fn walker_transfers_into_a_scan_encoder_policy_acting_the_same() {
     let mut walker_env = VecEnv::new(&walker_cfg.env).unwrap();
     common::assert_acts_alike(&mut old, &mut grown, &mut walker_env, 3);
     // ... and values alike: the critic's new units start silent too
-    let (critic, scan) = (walker_env.critic(), walker_env.scan());
-    let (v_old, v_new) = (old.values_of(critic, scan), grown.values_of(critic, scan));
-    assert!(
-        common::max_abs_diff(&v_old, &v_new) < 1e-5,
-        "{v_old:?} {v_new:?}"
-    );
+    common::assert_values_alike(&old, &grown, &walker_env);
 
     // a specialist's scan encoders grow too, their latent included: the new
     // latent units enter the actor and critic through zero columns
@@ -519,12 +514,7 @@ fn walker_transfers_into_a_scan_encoder_policy_acting_the_same() {
         assert!(t.grown.iter().any(|g| g == name), "{name}: {t}");
     }
     common::assert_acts_alike(&mut spec, &mut grown, &mut env, 3);
-    let (critic, scan) = (env.critic(), env.scan());
-    let (v_old, v_new) = (spec.values_of(critic, scan), grown.values_of(critic, scan));
-    assert!(
-        common::max_abs_diff(&v_old, &v_new) < 1e-5,
-        "{v_old:?} {v_new:?}"
-    );
+    common::assert_values_alike(&spec, &grown, &env);
 
     // a longer MLP history (oldest first): the older states enter through
     // zero columns, so the policy still acts on its last states alone

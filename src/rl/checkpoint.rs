@@ -93,9 +93,9 @@ pub struct Transfer {
     pub widened: Vec<String>,
     /// Scan-encoder tensors left at their fresh initialization.
     pub fresh: Vec<String>,
-    /// Actor, critic and scan-encoder layers grown to wider hidden sizes or a
-    /// wider scan latent (the old units copied, the new units' outgoing weights
-    /// zero).
+    /// Actor, critic and encoder layers grown to wider hidden sizes, a wider
+    /// scan latent or a longer history (the old units copied, the new units'
+    /// outgoing weights or new inputs' columns zero).
     pub grown: Vec<String>,
 }
 
@@ -432,11 +432,13 @@ impl Checkpoint {
         // only): the new latent units enter the actor and critic through zero
         // columns at the end of the scan block
         let src_se = &src_cfg.policy.scan_encoder;
-        let new_se = &agent.policy.cfg.scan_encoder;
+        let src_latent = if src_scan { src_se.latent() } else { 0 };
         let mlp = |k: ScanEncoderKind| k == ScanEncoderKind::Mlp;
-        let latent_grows = (src_scan && scan_out > 0 && mlp(src_se.kind) && mlp(new_se.kind))
-            .then(|| (src_se.latent(), scan_out - src_se.latent()))
-            .filter(|&(_, d)| d > 0);
+        let latent_grows = (src_scan
+            && scan_out > src_latent
+            && mlp(src_se.kind)
+            && mlp(agent.policy.cfg.scan_encoder.kind))
+        .then_some(scan_out - src_latent);
         let mut report = Transfer::default();
         for (name, mut var) in agent.policy.named_parameters() {
             let Some(src) = self.file.tensor(&format!("policy.{name}")).ok() else {
@@ -452,10 +454,11 @@ impl Checkpoint {
                 report.copied.push(name);
                 continue;
             }
-            // the first layer of the actor ([hist, scan, obs]) or critic ([scan, critic])
+            // the first layer of the actor ([hist, scan, obs]) or critic ([scan,
+            // critic]): where the source's scan block ends
             let offset = match name.as_str() {
                 "actor.0.weight" => Some(ss.get(1).copied().unwrap_or(0) - dims.obs as i64),
-                "critic.0.weight" => Some(0),
+                "critic.0.weight" => Some(src_latent),
                 _ => None,
             };
             // a longer MLP history: the history is oldest first, so the new
@@ -471,10 +474,8 @@ impl Checkpoint {
                 && ns[1] % dims.obs as i64 == 0
             {
                 tch::no_grad(|| {
-                    let _ = var.zero_();
                     var.narrow(0, 0, ss[0])
-                        .narrow(1, ns[1] - ss[1], ss[1])
-                        .copy_(src);
+                        .copy_(&with_zero_columns(src, 0, ns[1] - ss[1]))
                 });
                 report.grown.push(name);
                 continue;
@@ -482,21 +483,11 @@ impl Checkpoint {
             // the first layer of a policy whose scan latent grew: zero columns
             // for the new latent units (and, if the layer is wider too, its new
             // rows fresh, as below)
-            if let (Some(off), Some((_, d))) = (offset, latent_grows) {
-                let off = if name == "actor.0.weight" {
-                    off
-                } else {
-                    src_se.latent()
-                };
+            if let (Some(off), Some(d)) = (offset, latent_grows) {
                 if ss.len() == 2 && ns.len() == 2 && ns[1] == ss[1] + d && ns[0] >= ss[0] {
                     tch::no_grad(|| {
-                        let zeros = Tensor::zeros([ss[0], d], (src.kind(), src.device()));
-                        let rest = ss[1] - off;
-                        let w = Tensor::cat(
-                            &[src.narrow(1, 0, off), zeros, src.narrow(1, off, rest)],
-                            1,
-                        );
-                        var.narrow(0, 0, ss[0]).copy_(&w);
+                        var.narrow(0, 0, ss[0])
+                            .copy_(&with_zero_columns(src, off, d))
                     });
                     report.grown.push(name);
                     continue;
@@ -534,12 +525,7 @@ impl Checkpoint {
                     ),
                 ));
             };
-            tch::no_grad(|| {
-                let zeros = Tensor::zeros([ns[0], scan_out], (src.kind(), src.device()));
-                let rest = ss[1] - off;
-                let w = Tensor::cat(&[src.narrow(1, 0, off), zeros, src.narrow(1, off, rest)], 1);
-                var.copy_(&w);
-            });
+            tch::no_grad(|| var.copy_(&with_zero_columns(src, off, scan_out)));
             report.widened.push(name);
         }
         let d = dims;
@@ -602,9 +588,17 @@ impl Checkpoint {
     }
 }
 
+/// `w` (`[out, in]`) with `n` zero columns inserted before column `at`: the
+/// weights of inputs added there, silent until training moves them.
+fn with_zero_columns(w: &Tensor, at: i64, n: i64) -> Tensor {
+    let (rows, cols) = (w.size()[0], w.size()[1]);
+    let zeros = Tensor::zeros([rows, n], (w.kind(), w.device()));
+    Tensor::cat(&[w.narrow(1, 0, at), zeros, w.narrow(1, at, cols - at)], 1)
+}
+
 /// Whether `name` is a layer of the actor, critic or an MLP history or scan
-/// encoder that grows from `old` to `new` (as many dims, none smaller, the input of a first
-/// layer unchanged).
+/// encoder that grows from `old` to `new` (as many dims, none smaller, the
+/// input of a first layer unchanged).
 fn grows(name: &str, old: &[i64], new: &[i64]) -> bool {
     (name.starts_with("actor.")
         || name.starts_with("critic.")

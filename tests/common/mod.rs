@@ -133,6 +133,19 @@ pub fn assert_acts_alike(
     }
 }
 
+/// `old` and `new` (a transferred policy) value `task`'s current critic rows
+/// and scandots alike, to 1e-5.
+#[allow(dead_code)]
+pub fn assert_values_alike(
+    old: &dreampolicy::rl::Agent,
+    new: &dreampolicy::rl::Agent,
+    task: &dyn dreampolicy::rl::VecTask,
+) {
+    let (critic, scan) = (task.critic(), task.scan());
+    let (v_old, v_new) = (old.values_of(critic, scan), new.values_of(critic, scan));
+    assert!(max_abs_diff(&v_old, &v_new) < 1e-5, "{v_old:?} {v_new:?}");
+}
+
 /// The largest |a_i - b_i|.
 #[allow(dead_code)]
 pub fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
