@@ -56,7 +56,7 @@ fn real_transitions_are_the_datasets_consecutive_frames_of_one_episode() {
     let dir = Scratch::new("nodiff-real");
     let ds = write_dataset(&dir);
     let row = 2 * AMP_DIM;
-    let (all, episodes) = no_diffusion::dataset_transitions(&ds, &[], 1000).unwrap();
+    let (all, episodes) = no_diffusion::dataset_transitions(&ds, &[], 1000, 0).unwrap();
     assert_eq!(
         all.len() / row,
         15,
@@ -84,11 +84,35 @@ fn real_transitions_are_the_datasets_consecutive_frames_of_one_episode() {
     expected.sort_by_key(key);
     assert_eq!(got, expected);
     // the kind filter and the cap
-    let (stairs, _) = no_diffusion::dataset_transitions(&ds, &[TerrainKind::Stair], 1000).unwrap();
+    let (stairs, _) =
+        no_diffusion::dataset_transitions(&ds, &[TerrainKind::Stair], 1000, 0).unwrap();
     assert_eq!(stairs.len() / row, 7);
-    let (capped, _) = no_diffusion::dataset_transitions(&ds, &[], 4).unwrap();
-    assert_eq!(capped.len() / row, 4);
-    let e = no_diffusion::dataset_transitions(&ds, &[TerrainKind::Gap], 1000)
+    // the cap draws uniformly from the whole file, not its first rows: over
+    // many seeds each of the 15 transitions is kept about 4 / 15 of the time
+    // (the first-in-file-order rule kept the same 4 every time, all of them
+    // from the episodes written first)
+    let draws = 300;
+    let mut kept: std::collections::HashMap<i64, usize> = Default::default();
+    for seed in 0..draws {
+        let (capped, _) = no_diffusion::dataset_transitions(&ds, &[], 4, seed).unwrap();
+        assert_eq!(capped.len() / row, 4);
+        for r in capped.chunks(row) {
+            *kept.entry(key(&r.to_vec())).or_default() += 1;
+        }
+    }
+    assert_eq!(kept.len(), 15, "every transition is drawn by some seed");
+    for (k, n) in &kept {
+        let share = *n as f64 / draws as f64;
+        assert!(
+            (share - 4.0 / 15.0).abs() < 0.1,
+            "transition {k} kept in {share:.3} of the draws, not about 4/15"
+        );
+    }
+    // the same seed draws the same rows
+    let a = no_diffusion::dataset_transitions(&ds, &[], 4, 7).unwrap();
+    let b = no_diffusion::dataset_transitions(&ds, &[], 4, 7).unwrap();
+    assert_eq!(a, b);
+    let e = no_diffusion::dataset_transitions(&ds, &[TerrainKind::Gap], 1000, 0)
         .expect_err("no gap episodes");
     assert!(e.to_string().contains("no two consecutive frames"), "{e}");
     // Φ is the motion slice of the state

@@ -23,6 +23,8 @@
 use std::collections::HashMap;
 use std::path::Path;
 
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use tch::{Device, Tensor};
 
@@ -46,7 +48,8 @@ pub struct NoDiffusionConfig {
     /// Terrain kinds whose episodes give real transitions (default: all).
     #[serde(default)]
     pub kinds: Vec<String>,
-    /// At most this many real transitions are loaded (the first ones in file order).
+    /// At most this many real transitions are loaded, drawn uniformly from all
+    /// of the dataset's (seeded by `seed`).
     #[serde(default = "default_max")]
     pub max_transitions: usize,
     #[serde(default)]
@@ -54,7 +57,8 @@ pub struct NoDiffusionConfig {
     /// Weight of the style reward (the unified policy's 0.25).
     #[serde(default = "default_style")]
     pub style_weight: f64,
-    /// Seed of the discriminator's batch draws.
+    /// Seed of the discriminator's batch draws and of the draw of real
+    /// transitions when the dataset holds more than `max_transitions`.
     #[serde(default)]
     pub seed: u64,
 }
@@ -105,12 +109,17 @@ impl NoDiffusionConfig {
 /// The real transitions of a dataset: `Φ(s_t) ‖ Φ(s_{t+1})` rows
 /// ([`Discriminator::features`]) of every pair of consecutive frames of one
 /// episode (same episode id, step `t` then `t + 1`) whose terrain is in
-/// `kinds` (all when empty), at most `max` of them, in file order. Returns the
-/// rows and the number of episodes they came from.
+/// `kinds` (all when empty). When there are more than `max`, `max` of them
+/// drawn uniformly from the whole dataset (reservoir sampling, seeded by
+/// `seed`), not the first ones in file order: `collect` writes a specialist's
+/// shards one after another, so the first rows of a large dataset are all one
+/// terrain's. Returns the rows (in no particular order) and the number of
+/// episodes they came from.
 pub fn dataset_transitions(
     path: &Path,
     kinds: &[TerrainKind],
     max: usize,
+    seed: u64,
 ) -> Result<(Vec<f32>, usize), RlError> {
     let ds = Dataset::open(
         path,
@@ -122,9 +131,13 @@ pub fn dataset_transitions(
     .map_err(|e| RlError::Invalid(format!("no_diffusion.dataset: {e}")))?;
     let row = 2 * AMP_DIM;
     let mut out = Vec::new();
+    // the episode of each kept row
+    let mut owner: Vec<u64> = Vec::new();
+    // transitions seen so far (Algorithm R's count)
+    let mut seen = 0usize;
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5EED_DA7A);
     // each open episode's last frame: (step, state)
     let mut last: HashMap<u64, (u32, Vec<f32>)> = HashMap::new();
-    let mut episodes = std::collections::HashSet::new();
     for item in ds.frames() {
         let (_, f) = item.map_err(|e| RlError::Invalid(format!("no_diffusion.dataset: {e}")))?;
         if !kinds.is_empty() && !kinds.contains(&f.terrain) {
@@ -132,10 +145,18 @@ pub fn dataset_transitions(
         }
         if let Some((step, prev)) = last.get(&f.episode) {
             if f.step == step + 1 {
-                out.extend(Discriminator::features(prev, &f.state, OBS_DIM));
-                episodes.insert(f.episode);
-                if out.len() / row >= max {
-                    break;
+                seen += 1;
+                if owner.len() < max {
+                    out.extend(Discriminator::features(prev, &f.state, OBS_DIM));
+                    owner.push(f.episode);
+                } else {
+                    // keep this one with probability max / seen, in a uniform slot
+                    let j = rng.random_range(0..seen);
+                    if j < max {
+                        let feats = Discriminator::features(prev, &f.state, OBS_DIM);
+                        out[j * row..(j + 1) * row].copy_from_slice(&feats);
+                        owner[j] = f.episode;
+                    }
                 }
             }
         }
@@ -156,6 +177,7 @@ pub fn dataset_transitions(
             }
         )));
     }
+    let episodes: std::collections::HashSet<u64> = owner.into_iter().collect();
     Ok((out, episodes.len()))
 }
 
@@ -196,7 +218,8 @@ impl NoDiffusionTask {
             .map(|k| TerrainKind::from_name(k))
             .collect::<Result<Vec<_>, _>>()
             .map_err(|e| RlError::Invalid(format!("no_diffusion.kinds: {e}")))?;
-        let (real, _) = dataset_transitions(Path::new(&c.dataset), &kinds, c.max_transitions)?;
+        let (real, _) =
+            dataset_transitions(Path::new(&c.dataset), &kinds, c.max_transitions, c.seed)?;
         let env = VecEnv::new(&cfg.env)?;
         tch::manual_seed(cfg.train.seed as i64 ^ 0x00A1_1CE5);
         let disc = Discriminator::new(&c.amp, Device::Cpu);
