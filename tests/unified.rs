@@ -550,7 +550,7 @@ fn exported_bundle_runs_the_inference_loop(
     }
 }
 
-/// The small config's start: foundation_sym transferred into the unified
+/// The small config's start: its foundation transferred into the unified
 /// policy (zero columns for the future encoder, whose input is the plan, 8
 /// states of 98) acts exactly as the foundation on the unified task's states,
 /// so iteration 0 walks as the foundation does.
