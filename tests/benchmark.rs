@@ -257,3 +257,91 @@ fn benchmark_errors_name_the_file() {
         .to_string();
     assert!(e.contains("another --out"), "{e}");
 }
+
+/// A row of `results.csv` with the success rate and interval given.
+fn row(table: Table, method: &str, lane: &str, s: (f64, f64, f64)) -> benchmark::Row {
+    benchmark::Row {
+        table,
+        method: method.into(),
+        lane: lane.into(),
+        level: 0,
+        checkpoint: "x.pt".into(),
+        checkpoint_iteration: 1,
+        checkpoint_env_steps: 1,
+        episodes: 10,
+        seed: 0,
+        full_collision: true,
+        success_rate: s.0,
+        success_lo: s.1,
+        success_hi: s.2,
+        completion_rate: s.0,
+        completion_lo: s.1,
+        completion_hi: s.2,
+        falls: 0,
+        mean_forward_speed: 0.5,
+        wall_s: 1.0,
+    }
+}
+
+#[test]
+fn the_papers_orders_are_checked_against_our_intervals() {
+    use benchmark::report::{orderings, Verdict};
+    use benchmark::PaperMethod;
+    let dir = Scratch::new("bench-order");
+    let f = write_config(
+        &dir,
+        &format!(
+            "episodes: 10\ntables: [unseen, combined]\nmethods:\n  - name: mine\n    checkpoint: {w}\n    paper: ours\n  - name: student\n    checkpoint: {w}\n    paper: distillation\n  - name: other\n    checkpoint: {w}\n",
+            w = walker()
+        ),
+    );
+    let c = BenchmarkConfig::load(&f, &[]).unwrap();
+    let (u, cb) = (Table::Unseen, Table::Combined);
+    let rows = vec![
+        // slope_bridge: the paper 92.8 > 65.5; ours apart the same way
+        row(u, "mine", "slope_bridge", (0.9, 0.6, 0.98)),
+        row(u, "student", "slope_bridge", (0.1, 0.02, 0.4)),
+        // balancing_beam: the paper 96.3 > 74.4; ours apart the other way
+        row(u, "mine", "balancing_beam", (0.1, 0.02, 0.4)),
+        row(u, "student", "balancing_beam", (0.9, 0.6, 0.98)),
+        // wave: 100 and 100 in the paper, no order to check
+        row(u, "mine", "wave", (0.0, 0.0, 0.28)),
+        row(u, "student", "wave", (1.0, 0.72, 1.0)),
+        // a combined lane whose intervals overlap
+        row(cb, "mine", "stair&uneven", (0.6, 0.31, 0.83)),
+        row(cb, "student", "stair&uneven", (0.4, 0.17, 0.69)),
+        // a method without a paper row takes no part
+        row(cb, "other", "stair&gap", (1.0, 0.72, 1.0)),
+    ];
+    let checks = orderings(&c, &rows);
+    let got: Vec<(&str, Verdict)> = checks
+        .iter()
+        .map(|c| (c.lane.as_str(), c.verdict))
+        .collect();
+    assert_eq!(
+        got,
+        [
+            ("slope_bridge", Verdict::Holds),
+            ("balancing_beam", Verdict::Reversed),
+            ("stair&uneven", Verdict::Open),
+        ]
+    );
+    let b = &checks[1];
+    assert_eq!(
+        (b.better, b.worse),
+        (PaperMethod::Ours, PaperMethod::Distillation)
+    );
+    assert_eq!(
+        (b.ours_better.as_str(), b.ours_worse.as_str()),
+        ("mine", "student")
+    );
+    assert!((b.paper.0 - 96.35).abs() < 1e-9 && (b.paper.1 - 74.36).abs() < 1e-9);
+    assert_eq!(b.ours, (10.0, 90.0));
+    let md = benchmark::report::markdown(&c, &rows);
+    assert!(
+        md.contains("| slope_bridge | DreamPolicy > Distillation | 92.8 > 65.5 | mine 90 vs student 10 | holds |"),
+        "{md}"
+    );
+    assert!(md.contains("holds: 1, reversed: 1, open: 0."), "{md}");
+    assert!(md.contains("holds: 0, reversed: 0, open: 1."), "{md}");
+}

@@ -95,6 +95,166 @@ fn cell_text(r: Option<&Row>) -> String {
     }
 }
 
+/// What our measurements say of one order the paper publishes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Verdict {
+    /// Our success intervals lie apart, in the paper's order.
+    Holds,
+    /// Our success intervals lie apart, in the other order.
+    Reversed,
+    /// Our intervals overlap: these episodes do not tell.
+    Open,
+}
+
+impl Verdict {
+    pub fn name(self) -> &'static str {
+        match self {
+            Verdict::Holds => "holds",
+            Verdict::Reversed => "reversed",
+            Verdict::Open => "open",
+        }
+    }
+}
+
+/// One of the paper's published orders on one lane checked against our
+/// cells: the paper's method with the higher success (`better`) and the
+/// lower, the methods of ours named beside them (`paper:` in the config),
+/// both success rates (percent) and the verdict.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OrderCheck {
+    pub table: Table,
+    pub level: usize,
+    pub lane: String,
+    pub better: PaperMethod,
+    pub worse: PaperMethod,
+    pub ours_better: String,
+    pub ours_worse: String,
+    pub paper: (f64, f64),
+    pub ours: (f64, f64),
+    pub verdict: Verdict,
+}
+
+/// The paper's success differences smaller than this (percentage points)
+/// state no order.
+pub const PAPER_TIE_POINTS: f64 = 1.0;
+
+/// Every order the paper's published success rates state between two of its
+/// methods on a lane (differences of [`PAPER_TIE_POINTS`] or more), for the
+/// pairs the config names methods for (the first method of each `paper:`
+/// row), checked against our cells with their 95 % intervals: `Holds` when
+/// our better one's interval lies wholly above the other's, `Reversed` when
+/// wholly below, `Open` when they overlap. Lanes without both our cells are
+/// left out.
+pub fn orderings(cfg: &BenchmarkConfig, rows: &[Row]) -> Vec<OrderCheck> {
+    use PaperMethod::*;
+    let ours_of = |p: PaperMethod| {
+        cfg.methods
+            .iter()
+            .find(|m| m.paper == Some(p))
+            .map(|m| m.name.clone())
+    };
+    let mut out = Vec::new();
+    for table in &cfg.tables {
+        let lanes = table.lane_names();
+        let methods = [Ours, Distillation, WithoutDiffusion, WithoutGcrl];
+        for (i, &a) in methods.iter().enumerate() {
+            for &b in &methods[i + 1..] {
+                let (Some(pa), Some(pb)) = (paper_numbers(*table, a), paper_numbers(*table, b))
+                else {
+                    continue;
+                };
+                let (Some(ma), Some(mb)) = (ours_of(a), ours_of(b)) else {
+                    continue;
+                };
+                for level in &cfg.levels {
+                    for (k, lane) in lanes.iter().enumerate() {
+                        let (sa, sb) = (pa[k].0, pb[k].0);
+                        if (sa - sb).abs() < PAPER_TIE_POINTS {
+                            continue;
+                        }
+                        let (Some(ra), Some(rb)) = (
+                            find(rows, *table, &ma, lane, *level),
+                            find(rows, *table, &mb, lane, *level),
+                        ) else {
+                            continue;
+                        };
+                        // orient every check as (the paper's better, its worse)
+                        let ((better, worse), (ours_b, ours_w), (rb_, rw_), paper) = if sa > sb {
+                            ((a, b), (&ma, &mb), (ra, rb), (sa, sb))
+                        } else {
+                            ((b, a), (&mb, &ma), (rb, ra), (sb, sa))
+                        };
+                        let verdict = if rb_.success_lo > rw_.success_hi {
+                            Verdict::Holds
+                        } else if rw_.success_lo > rb_.success_hi {
+                            Verdict::Reversed
+                        } else {
+                            Verdict::Open
+                        };
+                        out.push(OrderCheck {
+                            table: *table,
+                            level: *level,
+                            lane: lane.clone(),
+                            better,
+                            worse,
+                            ours_better: ours_b.clone(),
+                            ours_worse: ours_w.clone(),
+                            paper,
+                            ours: (100.0 * rb_.success_rate, 100.0 * rw_.success_rate),
+                            verdict,
+                        });
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The orderings of one table and level as a Markdown table (empty when
+/// there are none).
+fn orderings_markdown(checks: &[OrderCheck], table: Table, level: usize) -> String {
+    let mine: Vec<&OrderCheck> = checks
+        .iter()
+        .filter(|c| c.table == table && c.level == level)
+        .collect();
+    if mine.is_empty() {
+        return String::new();
+    }
+    let mut md = String::new();
+    let _ = writeln!(
+        md,
+        "\nDoes the paper's order hold here? Success, the paper's then ours; \
+         `holds`: our 95 % intervals lie apart in the paper's order, `reversed`: apart the \
+         other way, `open`: they overlap.\n"
+    );
+    let _ = writeln!(md, "| lane | paper's order | paper | ours | verdict |");
+    let _ = writeln!(md, "|---|---|---|---|---|");
+    for c in &mine {
+        let _ = writeln!(
+            md,
+            "| {} | {} > {} | {:.1} > {:.1} | {} {:.0} vs {} {:.0} | {} |",
+            c.lane,
+            paper_name(c.better),
+            paper_name(c.worse),
+            c.paper.0,
+            c.paper.1,
+            c.ours_better,
+            c.ours.0,
+            c.ours_worse,
+            c.ours.1,
+            c.verdict.name()
+        );
+    }
+    let (h, r, o) = mine.iter().fold((0, 0, 0), |(h, r, o), c| match c.verdict {
+        Verdict::Holds => (h + 1, r, o),
+        Verdict::Reversed => (h, r + 1, o),
+        Verdict::Open => (h, r, o + 1),
+    });
+    let _ = writeln!(md, "\nholds: {h}, reversed: {r}, open: {o}.");
+    md
+}
+
 /// The Markdown report.
 pub fn markdown(cfg: &BenchmarkConfig, rows: &[Row]) -> String {
     let mut md = String::new();
@@ -114,6 +274,7 @@ pub fn markdown(cfg: &BenchmarkConfig, rows: &[Row]) -> String {
         cfg.seed,
         crate::sim::mujoco_version()
     );
+    let checks = orderings(cfg, rows);
     for table in &cfg.tables {
         let lanes = table.lane_names();
         for level in &cfg.levels {
@@ -160,6 +321,7 @@ pub fn markdown(cfg: &BenchmarkConfig, rows: &[Row]) -> String {
                     let _ = writeln!(md, "| {}{beside} | {} |", paper_name(p), cells.join(" | "));
                 }
             }
+            md.push_str(&orderings_markdown(&checks, *table, *level));
             let _ = writeln!(md);
         }
     }
