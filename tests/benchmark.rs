@@ -41,17 +41,21 @@ fn walker() -> String {
     common::walker_path().display().to_string()
 }
 
+/// A benchmark file of `body` (`{w}` standing for the committed walker),
+/// written into a scratch directory of `name` and loaded.
+fn load_with_walker(name: &str, body: &str) -> (Scratch, BenchmarkConfig) {
+    let dir = Scratch::new(name);
+    let f = write_config(&dir, &body.replace("{w}", &walker()));
+    let c = BenchmarkConfig::load(&f, &[]).unwrap();
+    (dir, c)
+}
+
 #[test]
 fn cells_follow_the_methods_checkpoints_and_the_tables() {
-    let dir = Scratch::new("bench-cells");
-    let f = write_config(
-        &dir,
-        &format!(
-            "episodes: 3\nlevels: [0, 2]\nmethods:\n  - name: spec\n    checkpoints: {{flat: {w}, bridge: {w}}}\n  - name: one\n    checkpoint: {w}\n",
-            w = walker()
-        ),
+    let (_dir, c) = load_with_walker(
+        "bench-cells",
+        "episodes: 3\nlevels: [0, 2]\nmethods:\n  - name: spec\n    checkpoints: {flat: {w}, bridge: {w}}\n  - name: one\n    checkpoint: {w}\n",
     );
-    let c = BenchmarkConfig::load(&f, &[]).unwrap();
     let cells = c.cells();
     let of = |m: &str, t: Table| {
         cells
@@ -287,15 +291,10 @@ fn row(table: Table, method: &str, lane: &str, s: (f64, f64, f64)) -> benchmark:
 fn the_papers_orders_are_checked_against_our_intervals() {
     use benchmark::report::{orderings, Verdict};
     use benchmark::PaperMethod;
-    let dir = Scratch::new("bench-order");
-    let f = write_config(
-        &dir,
-        &format!(
-            "episodes: 10\ntables: [unseen, combined]\nmethods:\n  - name: mine\n    checkpoint: {w}\n    paper: ours\n  - name: student\n    checkpoint: {w}\n    paper: distillation\n  - name: other\n    checkpoint: {w}\n",
-            w = walker()
-        ),
+    let (_dir, c) = load_with_walker(
+        "bench-order",
+        "episodes: 10\ntables: [unseen, combined]\nmethods:\n  - name: mine\n    checkpoint: {w}\n    paper: ours\n  - name: student\n    checkpoint: {w}\n    paper: distillation\n  - name: other\n    checkpoint: {w}\n",
     );
-    let c = BenchmarkConfig::load(&f, &[]).unwrap();
     let (u, cb) = (Table::Unseen, Table::Combined);
     let rows = vec![
         // slope_bridge: the paper 92.8 > 65.5; ours apart the same way
