@@ -114,6 +114,16 @@ pub enum PaperMethod {
     WithoutGcrl,
 }
 
+impl PaperMethod {
+    /// Every row of the paper's tables, in their order.
+    pub const ALL: [PaperMethod; 4] = [
+        PaperMethod::Ours,
+        PaperMethod::Distillation,
+        PaperMethod::WithoutDiffusion,
+        PaperMethod::WithoutGcrl,
+    ];
+}
+
 /// One method of the comparison.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -146,7 +146,6 @@ pub const PAPER_TIE_POINTS: f64 = 1.0;
 /// wholly below, `Open` when they overlap. Lanes without both our cells are
 /// left out.
 pub fn orderings(cfg: &BenchmarkConfig, rows: &[Row]) -> Vec<OrderCheck> {
-    use PaperMethod::*;
     let ours_of = |p: PaperMethod| {
         cfg.methods
             .iter()
@@ -156,7 +155,7 @@ pub fn orderings(cfg: &BenchmarkConfig, rows: &[Row]) -> Vec<OrderCheck> {
     let mut out = Vec::new();
     for table in &cfg.tables {
         let lanes = table.lane_names();
-        let methods = [Ours, Distillation, WithoutDiffusion, WithoutGcrl];
+        let methods = PaperMethod::ALL;
         for (i, &a) in methods.iter().enumerate() {
             for &b in &methods[i + 1..] {
                 let (Some(pa), Some(pb)) = (paper_numbers(*table, a), paper_numbers(*table, b))
@@ -178,15 +177,16 @@ pub fn orderings(cfg: &BenchmarkConfig, rows: &[Row]) -> Vec<OrderCheck> {
                         ) else {
                             continue;
                         };
-                        // orient every check as (the paper's better, its worse)
-                        let ((better, worse), (ours_b, ours_w), (rb_, rw_), paper) = if sa > sb {
-                            ((a, b), (&ma, &mb), (ra, rb), (sa, sb))
+                        // (paper's method, ours, our row, paper's success) of the
+                        // paper's better one, then of its worse one
+                        let (hi, lo) = if sa > sb {
+                            ((a, &ma, ra, sa), (b, &mb, rb, sb))
                         } else {
-                            ((b, a), (&mb, &ma), (rb, ra), (sb, sa))
+                            ((b, &mb, rb, sb), (a, &ma, ra, sa))
                         };
-                        let verdict = if rb_.success_lo > rw_.success_hi {
+                        let verdict = if hi.2.success_lo > lo.2.success_hi {
                             Verdict::Holds
-                        } else if rw_.success_lo > rb_.success_hi {
+                        } else if lo.2.success_lo > hi.2.success_hi {
                             Verdict::Reversed
                         } else {
                             Verdict::Open
@@ -195,12 +195,12 @@ pub fn orderings(cfg: &BenchmarkConfig, rows: &[Row]) -> Vec<OrderCheck> {
                             table: *table,
                             level: *level,
                             lane: lane.clone(),
-                            better,
-                            worse,
-                            ours_better: ours_b.clone(),
-                            ours_worse: ours_w.clone(),
-                            paper,
-                            ours: (100.0 * rb_.success_rate, 100.0 * rw_.success_rate),
+                            better: hi.0,
+                            worse: lo.0,
+                            ours_better: hi.1.clone(),
+                            ours_worse: lo.1.clone(),
+                            paper: (hi.3, lo.3),
+                            ours: (100.0 * hi.2.success_rate, 100.0 * lo.2.success_rate),
                             verdict,
                         });
                     }
@@ -288,15 +288,10 @@ pub fn markdown(cfg: &BenchmarkConfig, rows: &[Row]) -> String {
                     .collect();
                 let _ = writeln!(md, "| {} | {} |", m.name, cells.join(" | "));
             }
-            let paper: Vec<(PaperMethod, Vec<(f64, f64)>)> = [
-                PaperMethod::Ours,
-                PaperMethod::Distillation,
-                PaperMethod::WithoutDiffusion,
-                PaperMethod::WithoutGcrl,
-            ]
-            .into_iter()
-            .filter_map(|p| paper_numbers(*table, p).map(|v| (p, v)))
-            .collect();
+            let paper: Vec<(PaperMethod, Vec<(f64, f64)>)> = PaperMethod::ALL
+                .into_iter()
+                .filter_map(|p| paper_numbers(*table, p).map(|v| (p, v)))
+                .collect();
             if !paper.is_empty() {
                 let _ = writeln!(
                     md,
