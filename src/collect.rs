@@ -27,6 +27,7 @@ use crate::data::{
     shard_file_name, DataError, DatasetInfo, DatasetStats, Dims, Frame, ShardWriter, WriterOptions,
 };
 use crate::env::config::TerrainMode;
+use crate::env::obs::{scan_height, ScanGrid, SCAN_DIM};
 use crate::env::VecEnv;
 use crate::rl::checkpoint::Checkpoint;
 use crate::rl::{Agent, RlError, VecTask};
@@ -438,6 +439,12 @@ fn collect_shard(
     }
     let mut env = VecEnv::new(&env_cfg)?;
     let n = env.n_envs();
+    // The dataset's scandots are the paper's grid (the default), whatever grid
+    // the specialist reads: the world model is conditioned on that one. A
+    // specialist with another `scan_grid` walks on its own; its frames record
+    // the default grid's noise-free heights.
+    let oc = &env_cfg.observation;
+    let record_own_grid = oc.scan_grid == ScanGrid::default();
     let mut agent = Agent::new(&train.policy, env.dims(), n, train.ppo.normalize_obs);
     ck.load_agent(&mut agent)?;
     agent.set_frozen(true);
@@ -488,7 +495,26 @@ fn collect_shard(
     let mut pose = vec![([0.0f64; 3], [0.0f64; 4], 0u32); n];
     while done < target {
         obs.copy_from_slice(env.obs());
-        scan.copy_from_slice(VecTask::scan(&env));
+        if record_own_grid {
+            scan.copy_from_slice(VecTask::scan(&env));
+        } else {
+            let (grid, sh) = (ScanGrid::default(), env.shared());
+            for (e, row) in env.envs().iter().zip(scan.chunks_mut(SCAN_DIM)) {
+                let st = e.state();
+                let ground = |x: f64, y: f64| e.ground(sh, x, y);
+                for (k, v) in row.iter_mut().enumerate() {
+                    let h = scan_height(
+                        &ground,
+                        &grid,
+                        st.base_pos,
+                        st.yaw.sin_cos(),
+                        k,
+                        oc.scan_clip,
+                    );
+                    *v = (h * oc.scales.scan) as f32;
+                }
+            }
+        }
         for (i, p) in pose.iter_mut().enumerate() {
             let e = &env.envs()[i];
             let q = e.data().qpos();

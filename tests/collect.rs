@@ -205,6 +205,50 @@ fn collect_starts_each_specialist_at_its_own_levels() {
     );
 }
 
+/// A specialist that reads a finer scan grid records the paper's (default)
+/// grid all the same: on the same lanes and seeds its episodes' first frames
+/// hold the scandots of a default-grid specialist, not its own.
+#[test]
+fn collect_records_the_default_scan_grid_whatever_the_specialist_reads() {
+    let dir = Scratch::new("collect-grid");
+    let plain = tiny_uneven_policy(&dir, &[]);
+    let fine_dir = Scratch::new("collect-grid-fine");
+    let fine = tiny_uneven_policy(
+        &fine_dir,
+        &[
+            "env.observation.scan_grid.x0=-0.25",
+            "env.observation.scan_grid.y0=-0.25",
+            "env.observation.scan_grid.spacing=0.05",
+        ],
+    );
+    let first_scans = |ck: &std::path::Path, name: &str| {
+        let text = format!(
+            "specialists:\n  - {{terrain: uneven, checkpoint: {}}}\n\
+             n_envs: 4\nepisodes_per_env: 1\nrounds: 1\nepisode_length_s: 0.1\nthreads: 1\n",
+            ck.display()
+        );
+        let out = dir.0.join(name);
+        collect(&config(&text), &text, &out, true).unwrap();
+        let mut rows: Vec<(u32, Vec<f32>)> = Dataset::open(&out, Default::default())
+            .unwrap()
+            .frames()
+            .map(|f| f.unwrap().1)
+            .filter(|f| f.step == 0)
+            .map(|f| (f.env, f.scan))
+            .collect();
+        rows.sort_by_key(|r| r.0);
+        rows
+    };
+    let (a, b) = (first_scans(&plain, "plain"), first_scans(&fine, "fine"));
+    assert_eq!(a.len(), 4);
+    assert_eq!(a, b, "the same lanes give the same recorded scandots");
+    let relief = a
+        .iter()
+        .flat_map(|r| r.1.iter())
+        .fold(0f32, |m, v| m.max((v - a[0].1[0]).abs()));
+    assert!(relief > 0.01, "the lanes have relief ({relief})");
+}
+
 /// `commands` replaces every specialist's training commands: a fixed yaw-rate
 /// command (heading mode off) is the one every recorded state holds; a
 /// specialist's own `commands` replaces the config's.

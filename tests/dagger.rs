@@ -222,3 +222,33 @@ fn a_map_kind_without_a_teacher_is_refused() {
     let e = Dagger::new(&cfg, None).err().expect("stair has no teacher");
     assert!(e.to_string().contains("'stair'"), "{e}");
 }
+
+/// A teacher that reads its scandots on another grid than the student's env
+/// would be fed heights at the wrong points: refused, naming the key.
+#[test]
+fn a_teacher_on_another_scan_grid_is_refused() {
+    let dir = Scratch::new("dagger-grid");
+    let base = common::load_config("test/dagger_tiny.yaml", &[]);
+    let mut fine = base.clone();
+    fine.env.observation.scan_grid.spacing = 0.05;
+    let (flat, stair) = (
+        dir.0.join("teacher_flat.pt"),
+        dir.0.join("teacher_stair.pt"),
+    );
+    write_teacher(&base, 11, &flat);
+    write_teacher(&fine, 12, &stair);
+    let (f, s) = (flat.display().to_string(), stair.display().to_string());
+    let sets = [
+        format!("dagger.teachers.flat={f}"),
+        format!("dagger.teachers.stair={s}"),
+    ];
+    let sets: Vec<&str> = sets.iter().map(|s| s.as_str()).collect();
+    let cfg = common::load_config("test/dagger_tiny.yaml", &sets);
+    let e = Dagger::new(&cfg, None)
+        .err()
+        .expect("the stair teacher's grid differs");
+    assert!(
+        e.to_string().contains("scan_grid") && e.to_string().contains("stair"),
+        "{e}"
+    );
+}

@@ -17,9 +17,13 @@ fn cfg(sets: &[&str]) -> ExperimentConfig {
     common::load_config("terrain_small.yaml", &all)
 }
 
-#[test]
-fn scandots_match_mj_ray() {
-    let c = cfg(&["env.n_envs=5", "env.terrain.init_max_level=5"]);
+/// Every scandot of `grid` (the `env.observation.scan_grid` set by `sets`) equals
+/// the ground height that mj_ray finds at that point.
+fn scandots_match_mj_ray_on(sets: &[&str]) {
+    let mut all = vec!["env.n_envs=5", "env.terrain.init_max_level=5"];
+    all.extend_from_slice(sets);
+    let c = cfg(&all);
+    let grid = c.env.observation.scan_grid;
     let mut v = VecEnv::new(&c.env).unwrap();
     let zeros = vec![0.0f32; 5 * NUM_JOINTS];
     for _ in 0..5 {
@@ -34,7 +38,7 @@ fn scandots_match_mj_ray() {
         let (sy, cy) = st.yaw.sin_cos();
         let scan = &v.scan[i * SCAN_DIM..(i + 1) * SCAN_DIM];
         for (k, &got) in scan.iter().enumerate() {
-            let (px, py) = obs::scan_point(k);
+            let (px, py) = grid.point(k);
             let x = st.base_pos[0] + cy * px - sy * py;
             let y = st.base_pos[1] + sy * px + cy * py;
             let top = st.base_pos[2] + 5.0;
@@ -53,8 +57,35 @@ fn scandots_match_mj_ray() {
             varied = varied.max((got - scan[0]).abs() as f64);
         }
     }
-    assert!(worst < 1e-3, "worst |scandot - mj_ray| = {worst} m");
-    assert!(varied > 0.05, "some scan sees terrain relief");
+    assert!(
+        worst < 1e-3,
+        "worst |scandot - mj_ray| = {worst} m ({grid:?})"
+    );
+    assert!(varied > 0.05, "some scan sees terrain relief ({grid:?})");
+}
+
+#[test]
+fn scandots_match_mj_ray() {
+    scandots_match_mj_ray_on(&[]);
+}
+
+/// A finer grid (0.05 m, 0.8 m x 0.5 m around the feet) is read where it says,
+/// and the default grid is the one every older checkpoint saw.
+#[test]
+fn a_finer_scan_grid_reads_its_own_points() {
+    let d = obs::ScanGrid::default();
+    assert_eq!(d.point(0), (-0.6, -0.5));
+    let far = d.far_corner();
+    assert!((far.0 - 1.0).abs() < 1e-12 && (far.1 - 0.5).abs() < 1e-12);
+    scandots_match_mj_ray_on(&[
+        "env.observation.scan_grid.x0=-0.25",
+        "env.observation.scan_grid.y0=-0.25",
+        "env.observation.scan_grid.spacing=0.05",
+    ]);
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/terrain_small.yaml");
+    let bad = dreampolicy::rl::config::load(&path, &["env.observation.scan_grid.spacing=0".into()]);
+    let msg = format!("{}", bad.expect_err("a zero spacing is refused"));
+    assert!(msg.contains("scan_grid"), "{msg}");
 }
 
 /// Move env `i`'s robot `dx` along x, `height` above the ground; `fallen` lays it

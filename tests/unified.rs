@@ -568,3 +568,17 @@ fn the_foundation_transfers_into_the_unified_policy_acting_the_same() {
     assert!(s.iter().all(|v| v.is_finite()));
     assert!(s.iter().any(|&v| v != s[0]));
 }
+
+/// The world model is conditioned on the dataset's scandots, which `collect`
+/// records on the default grid: a unified env on another grid is refused.
+#[test]
+fn a_unified_env_on_another_scan_grid_is_refused() {
+    let cfg = common::load_config(
+        "unified/small.yaml",
+        &["env.n_envs=2", "env.observation.scan_grid.spacing=0.05"],
+    );
+    let e = dreampolicy::unified::task::UnifiedTask::new(&cfg)
+        .err()
+        .expect("another grid than the world model's");
+    assert!(e.to_string().contains("scan_grid"), "{e}");
+}

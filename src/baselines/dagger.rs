@@ -202,6 +202,15 @@ impl Teacher {
                 "{what} acts through another control interface (env.control or the control period differ from this config's): its labels would mean other targets"
             )));
         }
+        if tcfg.policy.scan_encoder.enabled
+            && tcfg.env.observation.scan_grid != student.env.observation.scan_grid
+        {
+            return Err(RlError::Invalid(format!(
+                "{what} reads its scandots on another grid ({:?}) than this config's env \
+                 ({:?}): set env.observation.scan_grid to the teacher's",
+                tcfg.env.observation.scan_grid, student.env.observation.scan_grid
+            )));
+        }
         let dims = env.dims();
         if ck.meta.dims != dims {
             return Err(RlError::Invalid(format!(

@@ -14,7 +14,7 @@ use super::DeployError;
 use crate::env::config::CollisionMode;
 use crate::env::obs::{
     ANG_VEL, COMMAND, DOF_POS, DOF_VEL, GRAVITY, LAST_ACTION, OBS_DIM, PHASE, SCAN_DIM, SCAN_NX,
-    SCAN_NY, SCAN_SPACING, SCAN_X0, SCAN_Y0,
+    SCAN_NY,
 };
 use crate::env::VecEnv;
 use crate::rl::checkpoint::Checkpoint;
@@ -582,9 +582,9 @@ pub fn write_bundle(ck: &Checkpoint, dir: &Path, onnx: bool) -> Result<BundleInf
             dim: SCAN_DIM,
             nx: SCAN_NX,
             ny: SCAN_NY,
-            x0: SCAN_X0,
-            y0: SCAN_Y0,
-            spacing: SCAN_SPACING,
+            x0: o.scan_grid.x0,
+            y0: o.scan_grid.y0,
+            spacing: o.scan_grid.spacing,
             clip: o.scan_clip,
             scale: sc.scan,
         },

@@ -196,6 +196,30 @@ impl Default for ControlConfig {
 }
 
 /// Observation scales and noise (legged_gym's defaults).
+/// Where the 187 scandots lie in the yaw-aligned pelvis frame: a 17 x 11 grid
+/// from `(x0, y0)` (its back right corner), `spacing` apart on both axes
+/// (`env.observation.scan_grid`; `obs::ScanGrid::point` gives point `k`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ScanGrid {
+    pub x0: f64,
+    pub y0: f64,
+    pub spacing: f64,
+}
+
+impl Default for ScanGrid {
+    /// 1.6 m x 1.0 m at 0.1 m: 0.6 m behind to 1.0 m ahead of the pelvis, 0.5 m
+    /// to either side (the paper's crop, and the grid every checkpoint before
+    /// 2026-12-06 saw).
+    fn default() -> Self {
+        ScanGrid {
+            x0: -0.6,
+            y0: -0.5,
+            spacing: 0.1,
+        }
+    }
+}
+
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ObservationConfig {
@@ -210,6 +234,8 @@ pub struct ObservationConfig {
     pub gait_period_s: f64,
     /// Scandots are clipped to +-scan_clip metres.
     pub scan_clip: f64,
+    /// Where the 187 scandots lie (origin and spacing of the 17 x 11 grid).
+    pub scan_grid: ScanGrid,
 }
 
 impl Default for ObservationConfig {
@@ -222,6 +248,7 @@ impl Default for ObservationConfig {
             clip: 100.0,
             gait_period_s: 0.8,
             scan_clip: 1.0,
+            scan_grid: ScanGrid::default(),
         }
     }
 }
@@ -489,6 +516,12 @@ impl EnvConfig {
                     "env.commands.lane_lookahead must be positive (m) or left out, got {l}"
                 ));
             }
+        }
+        let g = &self.observation.scan_grid;
+        if !(g.spacing > 0.0 && g.spacing <= 0.5 && g.x0.is_finite() && g.y0.is_finite()) {
+            return bad(format!(
+                "env.observation.scan_grid needs finite x0, y0 and 0 < spacing <= 0.5 m, got {g:?}"
+            ));
         }
         self.rewards.validate()?;
         self.commands

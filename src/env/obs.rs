@@ -19,8 +19,11 @@
 //! strength (1), action latency in control steps (1).
 //!
 //! Scandots ([`SCAN_DIM`] = 17 x 11): terrain height minus pelvis height (m) at
-//! `x` in -0.6..=1.0 and `y` in -0.5..=0.5, 0.1 m apart, in the yaw-aligned pelvis
-//! frame; index = `ix * 11 + iy` (x-major, x from back to front, y from right to left).
+//! the points of `env.observation.scan_grid` in the yaw-aligned pelvis frame:
+//! `x = x0 + spacing * ix`, `y = y0 + spacing * iy`, index = `ix * 11 + iy`
+//! (x-major, x from back to front, y from right to left). The default grid
+//! ([`ScanGrid::default`]) spans `x` in -0.6..=1.0 and `y` in -0.5..=0.5, 0.1 m
+//! apart; the count is fixed, the spacing and origin are the config's.
 use rand::Rng;
 
 use super::scene::BucketParams;
@@ -45,31 +48,43 @@ pub const CRITIC_DIM: usize = OBS_DIM + PRIV_DIM;
 pub const SCAN_NX: usize = 17;
 pub const SCAN_NY: usize = 11;
 pub const SCAN_DIM: usize = SCAN_NX * SCAN_NY;
-pub const SCAN_SPACING: f64 = 0.1;
-pub const SCAN_X0: f64 = -0.6;
-pub const SCAN_Y0: f64 = -0.5;
+pub use crate::env::config::ScanGrid;
 
-/// Scan point `k` in the yaw-aligned pelvis frame.
-#[inline]
-pub fn scan_point(k: usize) -> (f64, f64) {
-    let (ix, iy) = (k / SCAN_NY, k % SCAN_NY);
-    (
-        SCAN_X0 + SCAN_SPACING * ix as f64,
-        SCAN_Y0 + SCAN_SPACING * iy as f64,
-    )
+impl ScanGrid {
+    /// Scan point `k` in the yaw-aligned pelvis frame.
+    #[inline]
+    pub fn point(&self, k: usize) -> (f64, f64) {
+        let (ix, iy) = (k / SCAN_NY, k % SCAN_NY);
+        (
+            self.x0 + self.spacing * ix as f64,
+            self.y0 + self.spacing * iy as f64,
+        )
+    }
+
+    /// The grid's far corner `(x, y)`: `x0 + 16 spacing`, `y0 + 10 spacing`.
+    pub fn far_corner(&self) -> (f64, f64) {
+        self.point(SCAN_DIM - 1)
+    }
 }
 
-/// Scandot `k` without noise or scale: the ground height at the point's world
-/// position minus the pelvis height (m), clipped to `+-clip`. The pelvis is at
-/// `base_pos` with yaw `(sin, cos)`.
+/// Scan point `k` of the default grid, in the yaw-aligned pelvis frame.
+#[inline]
+pub fn scan_point(k: usize) -> (f64, f64) {
+    ScanGrid::default().point(k)
+}
+
+/// Scandot `k` of `grid` without noise or scale: the ground height at the
+/// point's world position minus the pelvis height (m), clipped to `+-clip`. The
+/// pelvis is at `base_pos` with yaw `(sin, cos)`.
 pub fn scan_height(
     ground: &dyn Fn(f64, f64) -> f64,
+    grid: &ScanGrid,
     base_pos: [f64; 3],
     (sy, cy): (f64, f64),
     k: usize,
     clip: f64,
 ) -> f64 {
-    let (px, py) = scan_point(k);
+    let (px, py) = grid.point(k);
     let x = base_pos[0] + cy * px - sy * py;
     let y = base_pos[1] + sy * px + cy * py;
     (ground(x, y) - base_pos[2]).clamp(-clip, clip)
@@ -169,7 +184,7 @@ pub fn write(
         0.0
     };
     for (k, out) in scan.iter_mut().enumerate().take(SCAN_DIM) {
-        let rel = scan_height(ctx.ground, s.base_pos, yaw, k, oc.scan_clip);
+        let rel = scan_height(ctx.ground, &oc.scan_grid, s.base_pos, yaw, k, oc.scan_clip);
         let e = if noise > 0.0 {
             rng.random_range(-noise..=noise)
         } else {

@@ -120,6 +120,13 @@ impl UnifiedTask {
                 u.world_model
             )));
         }
+        if cfg.env.observation.scan_grid != crate::env::obs::ScanGrid::default() {
+            return Err(RlError::Invalid(format!(
+                "env.observation.scan_grid {:?}: the world model reads the dataset's scandots, \
+                 which `collect` records on the default grid; leave scan_grid out",
+                cfg.env.observation.scan_grid
+            )));
+        }
         let (k, h) = (wm.history(), wm.horizon());
         let future = u.future_states.unwrap_or(h);
         if future > h {

@@ -92,7 +92,8 @@ impl<G: Fn(f64, f64) -> f64> TerrainSource for MapTerrain<G> {
             let yaw = pose.yaw.sin_cos();
             let row = &mut out[b * SCAN_DIM..(b + 1) * SCAN_DIM];
             for (k, v) in row.iter_mut().enumerate() {
-                *v = (scan_height(&self.ground, base, yaw, k, clip) * scale) as f32;
+                *v = (scan_height(&self.ground, &self.obs.scan_grid, base, yaw, k, clip) * scale)
+                    as f32;
             }
         }
         Ok(Tensor::from_slice(&out)
