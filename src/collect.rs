@@ -27,7 +27,7 @@ use crate::data::{
     shard_file_name, DataError, DatasetInfo, DatasetStats, Dims, Frame, ShardWriter, WriterOptions,
 };
 use crate::env::config::TerrainMode;
-use crate::env::obs::{scan_height, ScanGrid, SCAN_DIM};
+use crate::env::obs::{scan_row, ScanGrid, SCAN_DIM};
 use crate::env::VecEnv;
 use crate::rl::checkpoint::Checkpoint;
 use crate::rl::{Agent, RlError, VecTask};
@@ -502,17 +502,15 @@ fn collect_shard(
             for (e, row) in env.envs().iter().zip(scan.chunks_mut(SCAN_DIM)) {
                 let st = e.state();
                 let ground = |x: f64, y: f64| e.ground(sh, x, y);
-                for (k, v) in row.iter_mut().enumerate() {
-                    let h = scan_height(
-                        &ground,
-                        &grid,
-                        st.base_pos,
-                        st.yaw.sin_cos(),
-                        k,
-                        oc.scan_clip,
-                    );
-                    *v = (h * oc.scales.scan) as f32;
-                }
+                scan_row(
+                    &ground,
+                    &grid,
+                    st.base_pos,
+                    st.yaw.sin_cos(),
+                    oc.scan_clip,
+                    oc.scales.scan,
+                    row,
+                );
             }
         }
         for (i, p) in pose.iter_mut().enumerate() {

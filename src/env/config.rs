@@ -195,7 +195,6 @@ impl Default for ControlConfig {
     }
 }
 
-/// Observation scales and noise (legged_gym's defaults).
 /// Where the 187 scandots lie in the yaw-aligned pelvis frame: a 17 x 11 grid
 /// from `(x0, y0)` (its back right corner), `spacing` apart on both axes
 /// (`env.observation.scan_grid`; `obs::ScanGrid::point` gives point `k`).
@@ -220,6 +219,7 @@ impl Default for ScanGrid {
     }
 }
 
+/// Observation scales and noise (legged_gym's defaults).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ObservationConfig {

@@ -90,6 +90,23 @@ pub fn scan_height(
     (ground(x, y) - base_pos[2]).clamp(-clip, clip)
 }
 
+/// The noise-free scandots of `grid` into `out` ([`SCAN_DIM`]), times `scale`:
+/// [`scan_height`] at every point (what `collect` records and the world model's
+/// map terrain conditions on).
+pub fn scan_row(
+    ground: &dyn Fn(f64, f64) -> f64,
+    grid: &ScanGrid,
+    base_pos: [f64; 3],
+    yaw: (f64, f64),
+    clip: f64,
+    scale: f64,
+    out: &mut [f32],
+) {
+    for (k, v) in out.iter_mut().enumerate() {
+        *v = (scan_height(ground, grid, base_pos, yaw, k, clip) * scale) as f32;
+    }
+}
+
 const _: () = assert!(OBS_DIM == 98, "the paper's state is 98 floats");
 const _: () = assert!(SCAN_DIM == 187, "the paper's scandots are 187 floats");
 

@@ -17,7 +17,7 @@ use tch::{Device, Kind, Tensor};
 use super::rollout::TerrainSource;
 use super::WmError;
 use crate::env::config::ObservationConfig;
-use crate::env::obs::{scan_height, ANG_VEL, COMMAND, OBS_DIM, SCAN_DIM};
+use crate::env::obs::{scan_row, ANG_VEL, COMMAND, OBS_DIM, SCAN_DIM};
 
 /// A planar pose: world `x`, `y` (m) and yaw (rad).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -91,10 +91,15 @@ impl<G: Fn(f64, f64) -> f64> TerrainSource for MapTerrain<G> {
             let base = [pose.x, pose.y, (self.ground)(pose.x, pose.y) + h];
             let yaw = pose.yaw.sin_cos();
             let row = &mut out[b * SCAN_DIM..(b + 1) * SCAN_DIM];
-            for (k, v) in row.iter_mut().enumerate() {
-                *v = (scan_height(&self.ground, &self.obs.scan_grid, base, yaw, k, clip) * scale)
-                    as f32;
-            }
+            scan_row(
+                &self.ground,
+                &self.obs.scan_grid,
+                base,
+                yaw,
+                clip,
+                scale,
+                row,
+            );
         }
         Ok(Tensor::from_slice(&out)
             .view([self.poses.len() as i64, SCAN_DIM as i64])
