@@ -540,6 +540,102 @@ fn walker_transfers_into_a_scan_encoder_policy_acting_the_same() {
     );
 }
 
+/// `policy.estimator` (the paper's privileged-information estimator): added to
+/// a policy that lacks it, it starts silent (fresh weights, zero columns into
+/// the actor's first layer: the policy acts as its source); trained beside
+/// PPO, its regression of the critic's base velocity falls; the ONNX and
+/// NumPy exporters refuse it, and so does a task without the G1 critic.
+#[test]
+fn estimator_starts_silent_and_learns_the_base_velocity() {
+    use dreampolicy::env::VecEnv;
+    use dreampolicy::rl::{Agent, VecTask};
+    let _t = torch_lock();
+    let dir = Scratch::new("estimator");
+    let walker_cfg = load_config("test/g1_tiny.yaml", &["train.iterations=2"]);
+    let walker = runner::train(&walker_cfg, &dir.0.join("walker"), false, true).unwrap();
+    let ck = Checkpoint::read(&walker.checkpoint).unwrap();
+
+    let init = format!("train.init_checkpoint={}", walker.checkpoint.display());
+    let sets = [
+        init.as_str(),
+        "policy.estimator={dims: [32, 16]}",
+        "ppo.schedule=fixed",
+        "ppo.learning_rate=1e-3",
+        "env.n_envs=8",
+        "ppo.num_steps=16",
+        "train.iterations=30",
+        "train.save_interval=30",
+    ];
+    let cfg = load_config("test/g1_tiny.yaml", &sets);
+    let mut env = VecEnv::new(&cfg.env).unwrap();
+    let n = env.n_envs();
+    let mut old = Agent::new(&walker_cfg.policy, env.dims(), n, true);
+    ck.load_agent(&mut old).unwrap();
+    let mut new = Agent::new(&cfg.policy, env.dims(), n, true);
+    let t = ck.transfer_agent(&mut new).unwrap();
+    assert!(new.policy.has_estimator());
+    assert_eq!(t.grown, ["actor.0.weight"], "{t}");
+    let mut fresh = t.fresh.clone();
+    fresh.sort();
+    assert_eq!(
+        fresh,
+        [
+            "est.0.bias",
+            "est.0.weight",
+            "est.1.bias",
+            "est.1.weight",
+            "est.2.bias",
+            "est.2.weight"
+        ],
+        "{t}"
+    );
+    common::assert_acts_alike(&mut old, &mut new, &mut env, 3);
+
+    // trained beside PPO, the regression falls
+    let run = dir.0.join("est");
+    let s = runner::train(&cfg, &run, false, true).unwrap();
+    let loss = column(&run, "estimator_loss");
+    assert_eq!(loss.len(), 30);
+    assert!(loss.iter().all(|l| l.is_finite() && *l >= 0.0), "{loss:?}");
+    let (first, last) = (
+        loss[..5].iter().sum::<f64>() / 5.0,
+        loss[25..].iter().sum::<f64>() / 5.0,
+    );
+    assert!(last < 0.5 * first, "estimator loss {first} -> {last}");
+    // without the estimator the column is not there
+    assert!(!std::fs::read_to_string(dir.0.join("walker/metrics.csv"))
+        .unwrap()
+        .contains("estimator_loss"));
+
+    // the exporters that rebuild the network refuse it; TorchScript traces it
+    let est_ck = Checkpoint::read(&s.checkpoint).unwrap();
+    let e = dreampolicy::rl::onnx::export_onnx(&est_ck, &dir.0.join("p.onnx"))
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("estimator") && e.contains("--file-only"), "{e}");
+    let e = dreampolicy::rl::export::export_npz(&est_ck, &dir.0.join("p.npz"))
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("estimator"), "{e}");
+
+    // a task without the G1 critic, and a bad loss weight, are refused
+    let cp = load_config("test/cartpole.yaml", &["policy.estimator={}"]);
+    let e = runner::train(&cp, &dir.0.join("cp"), false, true)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("policy.estimator"), "{e}");
+    let mut bad = cfg.clone();
+    bad.policy.estimator.as_mut().unwrap().loss_coef = -1.0;
+    assert!(bad
+        .validate()
+        .unwrap_err()
+        .to_string()
+        .contains("policy.estimator.loss_coef"));
+}
+
 /// `checkpoint average`: the networks and normalizers of two kept checkpoints
 /// of one run are averaged element-wise; Adam's moments and the record are the
 /// last file's, which names both; a file of another network layout is refused.

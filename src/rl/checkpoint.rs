@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 use tch::{Kind, Tensor};
 
 use super::agent::Agent;
-use super::config::{HistoryKind, ScanEncoderKind};
+use super::config::{HistoryKind, ScanEncoderKind, ESTIMATE_DIM};
 use super::normalizer::RunningNorm;
 use super::optim::Adam;
 use super::RlError;
@@ -439,10 +439,15 @@ impl Checkpoint {
             && mlp(src_se.kind)
             && mlp(agent.policy.cfg.scan_encoder.kind))
         .then_some(scan_out - src_latent);
+        // a policy given the privileged-information estimator its source lacks
+        let src_est = src_cfg.policy.estimator.is_some();
+        let est_grows = !src_est && agent.policy.has_estimator();
         let mut report = Transfer::default();
         for (name, mut var) in agent.policy.named_parameters() {
             let Some(src) = self.file.tensor(&format!("policy.{name}")).ok() else {
-                if name.starts_with("scan_") && !src_scan {
+                if (name.starts_with("scan_") && !src_scan)
+                    || (name.starts_with("est.") && !src_est)
+                {
                     report.fresh.push(name);
                     continue;
                 }
@@ -461,6 +466,25 @@ impl Checkpoint {
                 "critic.0.weight" => Some(src_latent),
                 _ => None,
             };
+            // an estimator added: its estimate enters the actor's first layer
+            // through zero columns just before `o_t`
+            if name == "actor.0.weight"
+                && est_grows
+                && ss.len() == 2
+                && ns.len() == 2
+                && ns[0] >= ss[0]
+                && ns[1] == ss[1] + ESTIMATE_DIM as i64
+            {
+                tch::no_grad(|| {
+                    var.narrow(0, 0, ss[0]).copy_(&with_zero_columns(
+                        src,
+                        ss[1] - dims.obs as i64,
+                        ESTIMATE_DIM as i64,
+                    ))
+                });
+                report.grown.push(name);
+                continue;
+            }
             // a longer MLP history: the history is oldest first, so the new
             // (older) states enter through zero columns in front of the old ones
             if name == "hist.0.weight"

@@ -152,6 +152,38 @@ pub struct PolicyConfig {
     pub min_std: f64,
     pub history: HistoryConfig,
     pub scan_encoder: ScanEncoderConfig,
+    /// The privileged-information estimator (none unless given).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub estimator: Option<EstimatorConfig>,
+}
+
+/// Extreme Parkour's privileged-information estimator, which the paper's
+/// specialists use (appendix "Scenario Specialized Policy"): an MLP from the
+/// actor's rows (the history and the current state) to the base linear
+/// velocity the critic sees (the first [`ESTIMATE_DIM`] floats of the
+/// privileged block), trained by regression beside PPO
+/// (`loss_coef` x its mean squared error, in normalized units). Its estimate,
+/// detached, enters the actor's first layer between the scan latent and `o_t`,
+/// so that PPO's gradient does not move it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EstimatorConfig {
+    /// Hidden sizes of the MLP (its output is [`ESTIMATE_DIM`] floats).
+    pub dims: Vec<i64>,
+    /// Weight of the regression loss in the PPO loss.
+    pub loss_coef: f64,
+}
+
+/// Floats the estimator predicts: the base linear velocity (pelvis frame).
+pub const ESTIMATE_DIM: usize = 3;
+
+impl Default for EstimatorConfig {
+    fn default() -> Self {
+        EstimatorConfig {
+            dims: vec![128, 64],
+            loss_coef: 1.0,
+        }
+    }
 }
 
 impl Default for PolicyConfig {
@@ -164,6 +196,7 @@ impl Default for PolicyConfig {
             min_std: 0.2,
             history: HistoryConfig::default(),
             scan_encoder: ScanEncoderConfig::default(),
+            estimator: None,
         }
     }
 }
@@ -474,6 +507,12 @@ impl PolicyConfig {
             ("policy.critic_hidden", &self.critic_hidden),
             ("policy.history.mlp_dims", &self.history.mlp_dims),
             ("policy.scan_encoder.dims", &self.scan_encoder.dims),
+            (
+                "policy.estimator.dims",
+                self.estimator
+                    .as_ref()
+                    .map_or(&self.actor_hidden, |e| &e.dims),
+            ),
         ] {
             if dims.is_empty() || dims.iter().any(|&d| d <= 0) {
                 return bad(format!(
@@ -493,6 +532,14 @@ impl PolicyConfig {
                 "policy.scan_encoder.kind gru needs a positive step (floats per step) and gru_hidden, got {} and {}",
                 se.step, se.gru_hidden
             ));
+        }
+        if let Some(e) = &self.estimator {
+            if !(e.loss_coef.is_finite() && e.loss_coef >= 0.0) {
+                return bad(format!(
+                    "policy.estimator.loss_coef must be finite and >= 0, got {}",
+                    e.loss_coef
+                ));
+            }
         }
         if !(self.init_std > 0.0 && self.min_std > 0.0 && self.min_std <= self.init_std) {
             return bad(format!(

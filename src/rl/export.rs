@@ -139,6 +139,12 @@ fn mlp_name() -> String {
 /// libtorch. Same function as [`export`]'s TorchScript.
 pub fn export_npz(ck: &Checkpoint, out: &Path) -> Result<NpzPolicy, RlError> {
     let (cfg, agent) = checkpoint_agent(ck)?;
+    if agent.policy.has_estimator() {
+        return Err(RlError::Invalid(format!(
+            "{}: the policy has a privileged-information estimator (policy.estimator), which the NumPy deployer does not run yet: export its TorchScript file alone (`export --file-only`)",
+            ck.path.display()
+        )));
+    }
     let (om, os) = agent.obs_norm.tensors();
     let (sm, ss) = agent.scan_norm.tensors();
     let mut named: Vec<(String, Tensor)> = vec![

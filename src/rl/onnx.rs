@@ -96,6 +96,11 @@ pub fn actor_model(
     extra: &[(&str, String)],
 ) -> Result<(ModelProto, OnnxInfo), RlError> {
     let policy = &agent.policy;
+    if policy.has_estimator() {
+        return Err(RlError::Invalid(
+            "this policy has a privileged-information estimator (policy.estimator), which the ONNX and NumPy exporters do not write yet: export its TorchScript file alone (`export --file-only`)".into(),
+        ));
+    }
     let cfg = &policy.cfg;
     let d = agent.dims();
     let k = policy.history_len();

@@ -3,6 +3,10 @@
 //! `v_t = C(E_scan'(scandots), o_t^critic)`, a Gaussian policy with a
 //! state-independent standard deviation bounded below by `min_std`.
 //!
+//! With `policy.estimator`, the actor also reads its privileged-information
+//! estimator's base-velocity estimate (detached) between the scan latent and
+//! `o_t`.
+//!
 //! Inputs are already normalized. The actor input row is the `K` past states then
 //! the current one (`(K + 1) x obs` floats, oldest first); the critic reads the
 //! privileged critic observation (no history: it sees the base velocity the
@@ -10,7 +14,7 @@
 use tch::nn::{self, Module, RNN};
 use tch::{Kind, Tensor};
 
-use crate::rl::config::{Activation, HistoryKind, PolicyConfig, ScanEncoderKind};
+use crate::rl::config::{Activation, HistoryKind, PolicyConfig, ScanEncoderKind, ESTIMATE_DIM};
 
 use crate::env::task::TaskDims;
 
@@ -25,6 +29,8 @@ pub struct ActorCritic {
     actor: nn::Sequential,
     critic: nn::Sequential,
     log_std: Tensor,
+    /// The privileged-information estimator (`policy.estimator`).
+    est: Option<nn::Sequential>,
 }
 
 enum HistEncoder {
@@ -168,9 +174,14 @@ impl ActorCritic {
         let scan = dims.scan as i64;
         let scan_actor = use_scan.then(|| SeqEncoder::new(&root / "scan_actor", scan, cfg));
         let scan_critic = use_scan.then(|| SeqEncoder::new(&root / "scan_critic", scan, cfg));
+        let est_out = if cfg.estimator.is_some() {
+            ESTIMATE_DIM as i64
+        } else {
+            0
+        };
         let actor = mlp(
             &root / "actor",
-            hist_out + scan_out + obs,
+            hist_out + scan_out + est_out + obs,
             &cfg.actor_hidden,
             Some((dims.action as i64, 0.01)),
             a,
@@ -190,6 +201,17 @@ impl ActorCritic {
                 (Kind::Float, device),
             ),
         );
+        // made last, so that the other layers draw the same initial weights
+        // with and without it
+        let est = cfg.estimator.as_ref().map(|e| {
+            mlp(
+                &root / "est",
+                (k + 1) * obs,
+                &e.dims,
+                Some((ESTIMATE_DIM as i64, 1.0)),
+                a,
+            )
+        });
         ActorCritic {
             vs,
             cfg: cfg.clone(),
@@ -200,6 +222,7 @@ impl ActorCritic {
             actor,
             critic,
             log_std,
+            est,
         }
     }
 
@@ -238,8 +261,22 @@ impl ActorCritic {
         if let (Some(enc), Some(s)) = (&self.scan_actor, scan) {
             parts.push(enc.forward(s));
         }
+        if let Some(e) = &self.est {
+            parts.push(e.forward(actor_in).detach());
+        }
         parts.push(cur);
         self.actor.forward(&Tensor::cat(&parts, 1))
+    }
+
+    /// The estimator's base linear velocity `[B, 3]` (normalized units, with
+    /// its gradient) from actor rows, None without `policy.estimator`.
+    pub fn estimate(&self, actor_in: &Tensor) -> Option<Tensor> {
+        self.est.as_ref().map(|e| e.forward(actor_in))
+    }
+
+    /// Whether the policy has the privileged-information estimator.
+    pub fn has_estimator(&self) -> bool {
+        self.est.is_some()
     }
 
     /// The actor's scan (or future) latent of normalized scan rows `[B, scan]`

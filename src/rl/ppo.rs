@@ -11,7 +11,7 @@ use super::agent::Agent;
 use super::optim::Adam;
 use super::policy::ActorCritic;
 use super::storage::RolloutStorage;
-use crate::rl::config::{LrSchedule, PpoConfig, SymmetryRatio};
+use crate::rl::config::{LrSchedule, PpoConfig, SymmetryRatio, ESTIMATE_DIM};
 
 /// Mean losses and diagnostics of one update.
 #[derive(Debug, Clone, Default, Serialize)]
@@ -28,6 +28,9 @@ pub struct Losses {
     pub learning_rate: f64,
     pub grad_norm: f64,
     pub mean_std: f64,
+    /// The privileged-information estimator's mean squared error (normalized
+    /// units; 0 without `policy.estimator`).
+    pub estimator: f64,
 }
 
 /// PPO: its hyperparameters and optimizer.
@@ -284,6 +287,16 @@ impl Ppo {
                     let mirror_loss = (&mean - target).square().mean(Kind::Float);
                     loss += mirror_loss * c.mirror_loss_coef;
                 }
+                // the privileged-information estimator's regression on the
+                // critic's base velocity (the same rows, mirrored ones included)
+                let est_coef = policy.cfg.estimator.as_ref().map(|e| e.loss_coef);
+                if let (Some(coef), Some(est)) = (est_coef, policy.estimate(&pick(&actor_in))) {
+                    let target =
+                        pick(&critic_in).narrow(1, policy.dims.obs as i64, ESTIMATE_DIM as i64);
+                    let est_loss = (est - target).square().mean(Kind::Float);
+                    l.estimator += est_loss.double_value(&[]);
+                    loss += est_loss * coef;
+                }
                 self.opt.zero_grad();
                 loss.backward();
                 l.grad_norm += self.opt.clip_grad_norm(c.max_grad_norm);
@@ -312,6 +325,7 @@ impl Ppo {
             &mut l.kl,
             &mut l.clip_fraction,
             &mut l.grad_norm,
+            &mut l.estimator,
         ] {
             *v /= count;
         }

@@ -135,6 +135,18 @@ impl<'a, T: VecTask> Trainer<'a, T> {
         tch::manual_seed(cfg.train.seed as i64);
         let n = task.n_envs();
         cfg.policy.scan_encoder.check_input(task.dims().scan)?;
+        let d = task.dims();
+        if cfg.policy.estimator.is_some()
+            && (d.obs != crate::env::obs::OBS_DIM || d.critic != crate::env::obs::CRITIC_DIM)
+        {
+            return Err(RlError::Invalid(format!(
+                "policy.estimator regresses the G1 critic's base velocity (a {}-float state, a {}-float critic observation); this task has {} and {}",
+                crate::env::obs::OBS_DIM,
+                crate::env::obs::CRITIC_DIM,
+                d.obs,
+                d.critic
+            )));
+        }
         let mut agent = Agent::new(&cfg.policy, task.dims(), n, cfg.ppo.normalize_obs);
         let init = match (&cfg.train.init_checkpoint, resume) {
             (Some(path), None) => Some(Checkpoint::read(Path::new(path))?),
@@ -468,6 +480,9 @@ pub fn learn<T: VecTask>(
         ];
         row.extend(&rs.terms);
         row.extend(&rs.extra);
+        if cfg.policy.estimator.is_some() {
+            row.push(l.estimator);
+        }
         run.metrics_row(&row)?;
         last = (rs.mean_return, rs.mean_length);
         progress.set(
@@ -559,7 +574,10 @@ pub fn train_task<T: VecTask>(
     resume: bool,
     quiet: bool,
 ) -> Result<TrainSummary, RlError> {
-    let cols = columns(task);
+    let mut cols = columns(task);
+    if cfg.policy.estimator.is_some() {
+        cols.push("estimator_loss".into());
+    }
     let cols: Vec<&str> = cols.iter().map(|s| s.as_str()).collect();
     let (mut run, ck) = if resume {
         let ck = Checkpoint::read(&latest_checkpoint(run_dir))?;
