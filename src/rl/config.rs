@@ -172,6 +172,10 @@ pub struct EstimatorConfig {
     pub dims: Vec<i64>,
     /// Weight of the regression loss in the PPO loss.
     pub loss_coef: f64,
+    /// The estimator's own fixed Adam rate: PPO's adaptive rate (often
+    /// 2e-5 in a fine-tune) does not steer it, and its gradient is left out
+    /// of PPO's global clipping.
+    pub learning_rate: f64,
 }
 
 /// Floats the estimator predicts: the base linear velocity (pelvis frame).
@@ -182,6 +186,7 @@ impl Default for EstimatorConfig {
         EstimatorConfig {
             dims: vec![128, 64],
             loss_coef: 1.0,
+            learning_rate: 5e-4,
         }
     }
 }
@@ -538,6 +543,12 @@ impl PolicyConfig {
                 return bad(format!(
                     "policy.estimator.loss_coef must be finite and >= 0, got {}",
                     e.loss_coef
+                ));
+            }
+            if !(e.learning_rate.is_finite() && e.learning_rate > 0.0) {
+                return bad(format!(
+                    "policy.estimator.learning_rate must be positive, got {}",
+                    e.learning_rate
                 ));
             }
         }

@@ -10,6 +10,9 @@ pub struct Adam {
     pub v: Vec<Tensor>,
     pub step: i64,
     pub lr: f64,
+    /// A parameter's own fixed rate (`None`: `lr`); such parameters are also
+    /// left out of [`Adam::clip_grad_norm`].
+    fixed_lr: Vec<Option<f64>>,
     beta1: f64,
     beta2: f64,
     eps: f64,
@@ -21,12 +24,24 @@ impl Adam {
         Adam {
             m: params.iter().map(|(_, p)| zeros(p)).collect(),
             v: params.iter().map(|(_, p)| zeros(p)).collect(),
+            fixed_lr: vec![None; params.len()],
             params,
             step: 0,
             lr,
             beta1: 0.9,
             beta2: 0.999,
             eps: 1e-8,
+        }
+    }
+
+    /// Give the parameters whose names start with `prefix` their own fixed
+    /// rate `lr` (the adaptive rate then steers the others only), and leave
+    /// them out of the global gradient clipping.
+    pub fn fix_lr(&mut self, prefix: &str, lr: f64) {
+        for (i, (name, _)) in self.params.iter().enumerate() {
+            if name.starts_with(prefix) {
+                self.fixed_lr[i] = Some(lr);
+            }
         }
     }
 
@@ -76,7 +91,9 @@ impl Adam {
         let grads: Vec<Tensor> = self
             .params
             .iter()
-            .map(|(_, p)| p.grad())
+            .zip(&self.fixed_lr)
+            .filter(|(_, f)| f.is_none())
+            .map(|((_, p), _)| p.grad())
             .filter(|g| g.defined())
             .collect();
         if grads.is_empty() {
@@ -124,7 +141,7 @@ impl Adam {
                     .g_mul_scalar_(b2)
                     .g_add_(&(g.square() * (1.0 - b2)));
                 let denom = (&self.v[i] / bc2).sqrt() + eps;
-                let update = (&self.m[i] / bc1) / denom * lr;
+                let update = (&self.m[i] / bc1) / denom * self.fixed_lr[i].unwrap_or(lr);
                 let _ = p.g_sub_(&update);
             }
         });

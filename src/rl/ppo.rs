@@ -132,9 +132,13 @@ impl Ppo {
                 signed_perm(&m.action),
             ]
         });
+        let mut opt = Adam::new(policy.named_parameters(), cfg.learning_rate);
+        if let Some(e) = &policy.cfg.estimator {
+            opt.fix_lr("est.", e.learning_rate);
+        }
         Ppo {
             cfg: cfg.clone(),
-            opt: Adam::new(policy.named_parameters(), cfg.learning_rate),
+            opt,
             mirror,
         }
     }
