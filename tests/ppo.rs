@@ -606,6 +606,12 @@ fn estimator_starts_silent_and_learns_the_base_velocity() {
     assert!(!std::fs::read_to_string(dir.0.join("walker/metrics.csv"))
         .unwrap()
         .contains("estimator_loss"));
+    // the curves draw the regression in the losses panel when the column is
+    // there, and without it when it is not
+    for r in [&run, &dir.0.join("walker")] {
+        let png = runner::plot_run(r).unwrap();
+        assert!(std::fs::metadata(&png).unwrap().len() > 10_000, "{png:?}");
+    }
 
     // the exporters that rebuild the network refuse it; TorchScript traces it
     let est_ck = Checkpoint::read(&s.checkpoint).unwrap();

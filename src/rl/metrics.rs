@@ -39,11 +39,23 @@ pub const COLUMNS: [&str; 26] = [
 pub fn plot_run(run_dir: &Path) -> Result<PathBuf, crate::plot::PlotError> {
     use crate::plot::Panel;
     let x = "env_steps";
+    // the estimator's regression error joins the losses when the run has one
+    // (`policy.estimator`; the column exists only then)
+    let header = std::fs::read_to_string(run_dir.join("metrics.csv")).unwrap_or_default();
+    let has_estimator = header
+        .lines()
+        .next()
+        .is_some_and(|h| h.split(',').any(|c| c.trim() == "estimator_loss"));
+    let losses: &[&str] = if has_estimator {
+        &["value_loss", "surrogate_loss", "estimator_loss"]
+    } else {
+        &["value_loss", "surrogate_loss"]
+    };
     let panels = [
         Panel::new("episode return (last 100)", x, &["mean_return"]),
         Panel::new("episode length (steps)", x, &["mean_episode_length"]),
         Panel::new("tracking error", x, &["vel_error_xy", "vel_error_yaw"]),
-        Panel::new("losses", x, &["value_loss", "surrogate_loss"]),
+        Panel::new("losses", x, losses),
         Panel::new("policy", x, &["mean_std", "kl", "clip_fraction"]),
         Panel::new(
             "falls and penalty scale",
