@@ -590,6 +590,22 @@ fn estimator_starts_silent_and_learns_the_base_velocity() {
         "{t}"
     );
     common::assert_acts_alike(&mut old, &mut new, &mut env, 3);
+    // a scan encoder and the estimator added at once (a terrain line started
+    // from a flat foundation): both enter the actor through zero columns
+    let both = load_config(
+        "test/g1_tiny.yaml",
+        &[
+            init.as_str(),
+            "policy.estimator={dims: [32, 16]}",
+            "policy.scan_encoder.enabled=true",
+            "env.n_envs=8",
+        ],
+    );
+    let mut grown = Agent::new(&both.policy, env.dims(), n, true);
+    let t = ck.transfer_agent(&mut grown).unwrap();
+    assert!(grown.policy.has_estimator() && grown.policy.uses_scan());
+    assert!(t.widened.iter().any(|w| w == "actor.0.weight"), "{t}");
+    common::assert_acts_alike(&mut old, &mut grown, &mut env, 3);
 
     // trained beside PPO, the regression falls
     let run = dir.0.join("est");

@@ -533,13 +533,22 @@ impl Checkpoint {
                 report.grown.push(name);
                 continue;
             }
+            // a scan encoder added (and on the actor, with an estimator added
+            // at once, its estimate too: both blocks sit just before `o_t`,
+            // scan latent first, so they enter as one run of zero columns)
+            let extra = scan_out
+                + if name == "actor.0.weight" && est_grows {
+                    ESTIMATE_DIM as i64
+                } else {
+                    0
+                };
             let widen = offset.filter(|_| {
                 !src_scan
                     && scan_out > 0
                     && ss.len() == 2
                     && ns.len() == 2
                     && ss[0] == ns[0]
-                    && ns[1] == ss[1] + scan_out
+                    && ns[1] == ss[1] + extra
             });
             let Some(off) = widen else {
                 return Err(err(
@@ -549,7 +558,7 @@ impl Checkpoint {
                     ),
                 ));
             };
-            tch::no_grad(|| var.copy_(&with_zero_columns(src, off, scan_out)));
+            tch::no_grad(|| var.copy_(&with_zero_columns(src, off, extra)));
             report.widened.push(name);
         }
         let d = dims;
