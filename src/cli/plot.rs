@@ -21,17 +21,13 @@ enum Curves {
 }
 
 fn curves_of(run: &Path) -> Result<Curves> {
-    use std::io::BufRead;
     let path = run.join("metrics.csv");
-    let mut first = String::new();
-    std::fs::File::open(&path)
-        .map(std::io::BufReader::new)
-        .and_then(|mut f| f.read_line(&mut first))
+    let header = dreampolicy::plot::MetricsTable::header(&path)
         .with_context(|| format!("reading {} (is this a run directory?)", path.display()))?;
-    let header: Vec<&str> = first.trim_end().split(',').collect();
-    Ok(if header.contains(&"imitation_loss") {
+    let has = |c: &str| header.iter().any(|h| h == c);
+    Ok(if has("imitation_loss") {
         Curves::Dagger
-    } else if header.contains(&"val_loss") {
+    } else if has("val_loss") {
         Curves::WorldModel
     } else {
         Curves::Ppo

@@ -110,6 +110,22 @@ pub struct MetricsTable {
 }
 
 impl MetricsTable {
+    /// The column names of `path`'s header row alone (the rest of the file is
+    /// not read): which trainer wrote a run, which optional columns it has.
+    /// The error is the bare I/O error; the caller names the file.
+    pub fn header(path: &Path) -> std::io::Result<Vec<String>> {
+        use std::io::BufRead;
+        let mut first = String::new();
+        std::fs::File::open(path)
+            .map(std::io::BufReader::new)
+            .and_then(|mut f| f.read_line(&mut first))?;
+        Ok(first
+            .trim_end()
+            .split(',')
+            .map(|c| c.trim().to_string())
+            .collect())
+    }
+
     /// Read and parse `path` (format in the module doc).
     pub fn read(path: &Path) -> Result<MetricsTable, PlotError> {
         let text = std::fs::read_to_string(path).map_err(|source| PlotError::Io {

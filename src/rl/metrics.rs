@@ -41,11 +41,10 @@ pub fn plot_run(run_dir: &Path) -> Result<PathBuf, crate::plot::PlotError> {
     let x = "env_steps";
     // the estimator's regression error joins the losses when the run has one
     // (`policy.estimator`; the column exists only then)
-    let header = std::fs::read_to_string(run_dir.join("metrics.csv")).unwrap_or_default();
-    let has_estimator = header
-        .lines()
-        .next()
-        .is_some_and(|h| h.split(',').any(|c| c.trim() == "estimator_loss"));
+    let csv = run_dir.join("metrics.csv");
+    let header = crate::plot::MetricsTable::header(&csv)
+        .map_err(|source| crate::plot::PlotError::Io { path: csv, source })?;
+    let has_estimator = header.iter().any(|c| c == "estimator_loss");
     let losses: &[&str] = if has_estimator {
         &["value_loss", "surrogate_loss", "estimator_loss"]
     } else {
