@@ -173,6 +173,17 @@ fn a_mistyped_key_or_value_stops_the_sweep_before_any_run() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("learning_rate"));
 }
 
+/// `sweep run --jobs N --threads N` of `file` into `dir`, which must succeed.
+fn sweep_run_ok(dir: &Path, file: &Path, jobs: usize) {
+    let n = jobs.to_string();
+    run_ok(
+        bin()
+            .args(["sweep", "run", "--jobs", &n, "--threads", &n, "--out"])
+            .arg(dir)
+            .arg(file),
+    );
+}
+
 fn metrics_iterations(run: &Path) -> Vec<f64> {
     common::metrics_column(run, "iteration")
 }
@@ -376,25 +387,30 @@ fn a_baseline_sweep_trains_and_evaluates_its_policies() {
         &format!(
             "base: {}\ntrainer: no_diffusion\nset: [train.iterations=1, no_diffusion.dataset={}]\n\
              axes:\n  - {{key: no_diffusion.style_weight, name: style, values: [0.0, 0.5]}}\n\
-             eval: {{terrain: flat, episodes: 2, full_collision: false}}\n",
+             eval: {{terrains: [flat, stair], episodes: 2, full_collision: false}}\n",
             base.display(),
             ds.display()
         ),
     );
     let dir = s.0.join("out");
-    let out = bin()
-        .args(["sweep", "run", "--jobs", "1", "--threads", "1", "--out"])
-        .arg(&dir)
-        .arg(&file)
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{err}");
+    sweep_run_ok(&dir, &file, 1);
     for name in ["000-style=0.0", "001-style=0.5"] {
         let res = dreampolicy::sweep::read_result(&dir.join(name).join("result.json"))
             .unwrap_or_else(|e| panic!("{name}: {e}"));
         assert_eq!(res.iterations, 1);
-        assert_eq!(res.eval.as_ref().unwrap()["episodes"], 2);
+        // two terrains: each report under per_terrain, their mean on top
+        let e = res.eval.as_ref().unwrap();
+        assert_eq!(e["terrains"], serde_json::json!(["flat", "stair"]));
+        for k in ["flat", "stair"] {
+            assert_eq!(e["per_terrain"][k]["episodes"], 2, "{name} {k}");
+            assert_eq!(e["per_terrain"][k]["terrain"], k, "{name}");
+        }
+        let per = |k: &str| res.metric(&format!("eval.per_terrain.{k}.completion_rate"));
+        assert!(per("flat").is_finite() && per("stair").is_finite());
+        assert!(
+            (res.metric("eval.completion_rate") - (per("flat") + per("stair")) / 2.0).abs() < 1e-12
+        );
+        assert!(res.metric("eval.per_terrain.gap.success_rate").is_nan());
         let cols = std::fs::read_to_string(dir.join(name).join("metrics.csv")).unwrap();
         assert!(cols.lines().next().unwrap().contains("amp_accuracy"));
     }
@@ -422,4 +438,72 @@ fn a_baseline_sweep_trains_and_evaluates_its_policies() {
     );
     let e = Sweep::load(&bad).unwrap_err().to_string();
     assert!(e.contains("1 labels for 2 values"), "{e}");
+}
+
+#[test]
+fn a_figure_plots_chosen_runs_against_their_own_x_and_bad_panels_are_refused() {
+    // the scaling figure's shape: a list sweep, one panel over runs 0-1 (x in
+    // reverse order of the runs) and one over run 2 with run 1, two seeds
+    let s = Scratch::new("sweep-figure");
+    let text = format!(
+        "base: {}\nmode: list\nset: [train.iterations=3, train.save_interval=3]\n\
+         axes:\n  - {{key: ppo.learning_rate, name: lr, values: [3.0e-4, 1.0e-3, 3.0e-3]}}\n\
+         seeds: [1, 2]\nmetrics: [mean_episode_length]\nfinal_window: 1\n\
+         figure:\n  - {{title: size, x_label: fraction, runs: [0, 1], x: [1.0, 0.5]}}\n  - {{title: kinds, x_label: kinds, runs: [2, 1], x: [1, 5]}}\n",
+        cartpole().display()
+    );
+    let file = s.write("f.yaml", &text);
+    let dir = s.0.join("out");
+    sweep_run_ok(&dir, &file, 2);
+    let c = dreampolicy::sweep::collect(&dreampolicy::sweep::SweepDir::new(&dir), None).unwrap();
+    let png = std::fs::read(c.png.as_ref().unwrap()).unwrap();
+    assert_eq!(&png[1..4], b"PNG");
+    let series = dreampolicy::sweep::figure_series(&c.sweep, &c.results, "mean_episode_length");
+    assert_eq!(series.len(), 2);
+    let metric = |combination: usize, seed: u64| {
+        let (_, r) = c
+            .results
+            .iter()
+            .find(|(r, _)| r.index == combination * 2 + (seed as usize - 1))
+            .unwrap();
+        let r = r.as_ref().unwrap();
+        assert_eq!(r.seed, Some(seed));
+        r.metric("mean_episode_length")
+    };
+    // points sorted by x: run 1 (x 0.5) before run 0 (x 1.0)
+    assert_eq!(series[0].x, [0.5, 1.0]);
+    assert_eq!(series[0].title, "size: mean_episode_length");
+    let names: Vec<&str> = series[0].lines.iter().map(|l| l.0.as_str()).collect();
+    assert_eq!(names, ["seed 1", "seed 2", "mean"]);
+    assert_eq!(series[0].lines[0].1, [metric(1, 1), metric(0, 1)]);
+    assert_eq!(series[0].lines[1].1, [metric(1, 2), metric(0, 2)]);
+    assert!((series[0].lines[2].1[0] - (metric(1, 1) + metric(1, 2)) / 2.0).abs() < 1e-12);
+    assert_eq!(series[1].x, [1.0, 5.0]);
+    assert_eq!(series[1].lines[0].1, [metric(2, 1), metric(1, 1)]);
+    assert!(series
+        .iter()
+        .flat_map(|p| &p.lines)
+        .flat_map(|l| &l.1)
+        .all(|v| v.is_finite()));
+
+    // a run the sweep does not have, x of another length
+    for (bad, msg) in [
+        (
+            "runs: [0, 3], x: [1, 2]",
+            "run 3, but the sweep has 3 combinations",
+        ),
+        ("runs: [0, 1], x: [1]", "2 runs and 1 x values"),
+    ] {
+        let t = text.replace("runs: [2, 1], x: [1, 5]", bad);
+        let e = Sweep::load(&s.write("bad.yaml", &t))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(msg), "{e}");
+    }
+    // an unknown eval terrain stops the sweep at load
+    let t = format!("{text}eval: {{terrains: [flat, lava]}}\n");
+    let e = Sweep::load(&s.write("lava.yaml", &t))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("lava"), "{e}");
 }

@@ -647,3 +647,67 @@ fn bad_configs_and_checkpoints_are_clear_errors() {
         .to_string();
     assert!(e.contains("none.pt") && e.contains("no such file"), "{e}");
 }
+
+#[test]
+fn an_inference_copy_plans_as_its_source_and_cannot_resume() {
+    let _t = torch_lock();
+    let dir = Scratch::new("wm-strip");
+    let data = dir.0.join("data");
+    write_dataset(&data, 4, 40);
+    let cfg = tiny(&data, &["train.iterations=4"]);
+    let run = dir.0.join("run");
+    train(&cfg, &run, false, true).unwrap();
+    let src = latest_checkpoint(&run);
+    let out = dir.0.join("wm_inference.pt");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_dreampolicy"))
+        .args(["checkpoint", "strip", "--out"])
+        .arg(&out)
+        .arg(&src)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    dreampolicy::checkpoint::verify_file(&out).unwrap();
+    // the EMA and normalization only: no live model, no Adam moments
+    let ck = WmCheckpoint::read(&out).unwrap();
+    assert!(ck.meta().inference_only);
+    assert_eq!(ck.meta().iteration, 4);
+    let names = ck.file.names();
+    assert!(names.iter().any(|n| n.starts_with("ema.")));
+    assert!(names.iter().any(|n| n.starts_with("norm.")));
+    assert!(!names
+        .iter()
+        .any(|n| n.starts_with("model.") || n.starts_with("adam_")));
+    let size = |p: &Path| std::fs::metadata(p).unwrap().len() as f64;
+    assert!(
+        size(&out) < 0.4 * size(&src),
+        "{} of {}",
+        size(&out),
+        size(&src)
+    );
+    // the same plans for the same history, scandots and seed
+    let (a, b) = (
+        WorldModel::load(&src, Device::Cpu).unwrap(),
+        WorldModel::load(&out, Device::Cpu).unwrap(),
+    );
+    let (hist, scan) = inputs(&cfg, 3, 5);
+    let sc = a.cfg.sampling.clone();
+    let pa = a.predict(&hist, &scan, &sc, &mut Noise::new(9)).unwrap();
+    let pb = b.predict(&hist, &scan, &sc, &mut Noise::new(9)).unwrap();
+    assert!(equal(&pa, &pb));
+    // training refuses to resume from it, saying why; stripping twice is refused
+    std::fs::copy(&out, &src).unwrap();
+    let more = tiny(&data, &["train.iterations=6"]);
+    let e = train(&more, &run, true, true).err().unwrap().to_string();
+    assert!(
+        e.contains("inference copy") && e.contains("cannot resume"),
+        "{e}"
+    );
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_dreampolicy"))
+        .args(["checkpoint", "strip", "--out"])
+        .arg(dir.0.join("again.pt"))
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("already an inference copy"));
+}

@@ -1,4 +1,4 @@
-//! `dreampolicy checkpoint verify|seal|average`: the integrity seals of the files a
+//! `dreampolicy checkpoint verify|seal|average|strip`: the integrity seals of the files a
 //! later run trusts. By kind: a checkpoint (`*.pt`: a SHA-256 in the archive's
 //! zip comment, `dreampolicy::checkpoint`), a run's `config.yaml` (a seal line,
 //! `dreampolicy::seal`), a dataset's `stats.json` (a `"sha256"` first key), an
@@ -37,6 +37,17 @@ pub enum CheckpointCommand {
         out: PathBuf,
         #[arg(required = true, num_args = 2..)]
         files: Vec<PathBuf>,
+    },
+    /// Write the inference copy of a finished world model: the EMA denoiser
+    /// and the normalization, without the live model and Adam's moments (a
+    /// quarter of the size). It plans, evaluates and exports as its source;
+    /// training refuses to resume from it.
+    Strip {
+        /// The file to write (a sealed checkpoint).
+        #[arg(long)]
+        out: PathBuf,
+        /// A world-model checkpoint.
+        file: PathBuf,
     },
 }
 
@@ -141,6 +152,29 @@ pub fn run(which: CheckpointCommand) -> Result<()> {
                 files.len(),
                 meta.iteration,
                 meta.env_steps
+            );
+            Ok(())
+        }
+        CheckpointCommand::Strip { out, file } => {
+            if out == file {
+                bail!(
+                    "--out {} is the file to strip: write the copy elsewhere",
+                    out.display()
+                );
+            }
+            let ck = dreampolicy::world_model::checkpoint::WmCheckpoint::read(&file)?;
+            if ck.meta().inference_only {
+                bail!("{} is already an inference copy", file.display());
+            }
+            ck.write_inference_copy(&out)?;
+            let size = |p: &Path| std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
+            println!(
+                "wrote {}: the EMA weights of {} (step {}), {:.1} MB of {:.1} MB",
+                out.display(),
+                file.display(),
+                ck.meta().iteration,
+                size(&out) as f64 / 1e6,
+                size(&file) as f64 / 1e6
             );
             Ok(())
         }

@@ -154,6 +154,11 @@ impl Axis {
 pub struct SweepEval {
     /// Terrain of the lanes (`flat`, `stair`, ...).
     pub terrain: String,
+    /// Several terrains instead of `terrain` (e.g. the four unseen ones): each
+    /// evaluated on its own lanes; `eval.json` then holds their mean
+    /// `success_rate` and `completion_rate` and each report under
+    /// `per_terrain.<kind>` (a metric such as `eval.per_terrain.wave.success_rate`).
+    pub terrains: Vec<String>,
     pub episodes: usize,
     /// Lane level (default: the config's `eval.level`).
     pub level: Option<usize>,
@@ -166,12 +171,41 @@ impl Default for SweepEval {
     fn default() -> Self {
         SweepEval {
             terrain: "flat".into(),
+            terrains: Vec::new(),
             episodes: 20,
             level: None,
             full_collision: true,
             seed: 0,
         }
     }
+}
+
+impl SweepEval {
+    /// The terrains evaluated: `terrains`, or `terrain` alone.
+    pub fn kinds(&self) -> Vec<String> {
+        if self.terrains.is_empty() {
+            vec![self.terrain.clone()]
+        } else {
+            self.terrains.clone()
+        }
+    }
+}
+
+/// One panel of a sweep's figure (`figure:`): the metric of chosen
+/// combinations against x values of the sweep's own choosing, e.g. a list
+/// sweep's runs 0-2 against their dataset size and runs 3-6 and 2 against
+/// their number of terrain kinds (the paper's scaling figure). Without
+/// `figure`, `collect` plots the metric against the first axis.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FigurePanel {
+    pub title: String,
+    pub x_label: String,
+    /// Combination indices (the runs' order before seeds: in list mode, the
+    /// i-th value of every axis); each seed of a combination is its own line.
+    pub runs: Vec<usize>,
+    /// x of each of `runs`, as long.
+    pub x: Vec<f64>,
 }
 
 /// What one run needs: the threads it gets locally, and its Slurm request.
@@ -245,6 +279,9 @@ pub struct Sweep {
     pub seeds: Vec<u64>,
     #[serde(default)]
     pub eval: Option<SweepEval>,
+    /// Panels of `summary.png` (default: the metric against the first axis).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub figure: Vec<FigurePanel>,
     #[serde(default)]
     pub resources: Resources,
     /// Columns of `metrics.csv` (and `eval.*` fields) that `collect` tabulates
@@ -409,6 +446,34 @@ impl Sweep {
         }
         if self.final_window == 0 {
             return bad("final_window must be >= 1".into());
+        }
+        if let Some(e) = &self.eval {
+            for k in e.kinds() {
+                if let Err(err) = crate::terrain::TerrainKind::from_name(&k) {
+                    return bad(format!("eval: {err}"));
+                }
+            }
+        }
+        let combinations = self.combinations().len();
+        for p in &self.figure {
+            if p.runs.is_empty() || p.runs.len() != p.x.len() {
+                return bad(format!(
+                    "figure panel '{}': {} runs and {} x values (one x per run, at least one)",
+                    p.title,
+                    p.runs.len(),
+                    p.x.len()
+                ));
+            }
+            if let Some(&i) = p.runs.iter().find(|&&i| i >= combinations) {
+                return bad(format!(
+                    "figure panel '{}': run {i}, but the sweep has {combinations} combinations (0..{})",
+                    p.title,
+                    combinations.saturating_sub(1)
+                ));
+            }
+            if p.x.iter().any(|x| !x.is_finite()) {
+                return bad(format!("figure panel '{}': x must be finite", p.title));
+            }
         }
         if self.eval.is_some() && !self.trainer.trains_a_policy() {
             return bad(
@@ -803,26 +868,49 @@ fn evaluate_run(
     e: &SweepEval,
     threads: usize,
 ) -> Result<serde_json::Value, String> {
-    let terrain =
-        crate::terrain::TerrainKind::from_name(&e.terrain).map_err(|err| format!("eval: {err}"))?;
     let ck = crate::rl::checkpoint::Checkpoint::read(&crate::run::latest_checkpoint(run_dir))
         .map_err(|err| format!("eval: {err}"))?;
-    let report = crate::eval::evaluate(
-        &ck,
-        &crate::eval::EvalOptions {
-            terrain,
-            then: None,
-            episodes: e.episodes,
-            full_collision: e.full_collision,
-            seed: e.seed,
-            threads,
-            level: e.level,
-            table: crate::eval::EvalTable::Eval,
-            lane_lookahead: None,
-        },
-    )
-    .map_err(|err| format!("eval: {err}"))?;
-    let json = serde_json::to_value(&report).map_err(|err| err.to_string())?;
+    let kinds = e.kinds();
+    let mut reports = serde_json::Map::new();
+    let (mut success, mut completion) = (0.0, 0.0);
+    for name in &kinds {
+        let terrain =
+            crate::terrain::TerrainKind::from_name(name).map_err(|err| format!("eval: {err}"))?;
+        let report = crate::eval::evaluate(
+            &ck,
+            &crate::eval::EvalOptions {
+                terrain,
+                then: None,
+                episodes: e.episodes,
+                full_collision: e.full_collision,
+                seed: e.seed,
+                threads,
+                level: e.level,
+                table: crate::eval::EvalTable::Eval,
+                lane_lookahead: None,
+            },
+        )
+        .map_err(|err| format!("eval on {name}: {err}"))?;
+        success += report.success_rate;
+        completion += report.completion_rate;
+        let json = serde_json::to_value(&report).map_err(|err| err.to_string())?;
+        reports.insert(name.clone(), json);
+    }
+    let json = if kinds.len() == 1 {
+        reports
+            .into_iter()
+            .next()
+            .map(|(_, v)| v)
+            .unwrap_or_default()
+    } else {
+        let n = kinds.len() as f64;
+        serde_json::json!({
+            "terrains": kinds,
+            "success_rate": success / n,
+            "completion_rate": completion / n,
+            "per_terrain": reports,
+        })
+    };
     std::fs::write(
         run_dir.join("eval.json"),
         serde_json::to_string_pretty(&json).unwrap_or_default(),
@@ -840,15 +928,15 @@ pub fn read_result(path: &Path) -> Result<RunResult, SweepError> {
 }
 
 impl RunResult {
-    /// A metric by name: a metrics.csv column, or `eval.<field>`; NaN if absent.
+    /// A metric by name: a metrics.csv column, or `eval.<field>` (a dotted
+    /// path into the report, `eval.per_terrain.wave.success_rate`); NaN if absent.
     pub fn metric(&self, name: &str) -> f64 {
-        if let Some(field) = name.strip_prefix("eval.") {
-            return self
-                .eval
-                .as_ref()
-                .and_then(|e| e.get(field))
-                .and_then(serde_json::Value::as_f64)
-                .unwrap_or(f64::NAN);
+        if let Some(path) = name.strip_prefix("eval.") {
+            let mut v = self.eval.as_ref();
+            for key in path.split('.') {
+                v = v.and_then(|x| x.get(key));
+            }
+            return v.and_then(serde_json::Value::as_f64).unwrap_or(f64::NAN);
         }
         self.final_metrics.get(name).copied().unwrap_or(f64::NAN)
     }
@@ -1012,6 +1100,12 @@ fn plot_collected(
     if results.iter().all(|(_, r)| r.is_none()) {
         return Ok(None);
     }
+    let png = dir.path.join("summary.png");
+    if !sweep.figure.is_empty() {
+        let series = figure_series(sweep, results, metric);
+        crate::plot::plot_series(&png, &format!("sweep {}: {metric}", sweep.name()), &series)?;
+        return Ok(Some(png));
+    }
     let axis = &sweep.axes[0];
     // x positions: the first axis' distinct values in order of appearance
     let mut xs_text: Vec<String> = Vec::new();
@@ -1085,18 +1179,7 @@ fn plot_collected(
             if seeds.len() > 1 {
                 let mean: Vec<f64> = order
                     .iter()
-                    .map(|&xi| {
-                        let v: Vec<f64> = seeds
-                            .iter()
-                            .map(|&s| at(s, xi))
-                            .filter(|v| v.is_finite())
-                            .collect();
-                        if v.is_empty() {
-                            f64::NAN
-                        } else {
-                            v.iter().sum::<f64>() / v.len() as f64
-                        }
-                    })
+                    .map(|&xi| finite_mean(seeds.iter().map(|&s| at(s, xi))))
                     .collect();
                 lines.push(("mean".into(), mean));
             }
@@ -1108,9 +1191,71 @@ fn plot_collected(
             }
         })
         .collect();
-    let png = dir.path.join("summary.png");
     crate::plot::plot_series(&png, &format!("sweep {}: {metric}", sweep.name()), &series)?;
     Ok(Some(png))
+}
+
+/// The mean of the finite values (seeds' figures, unfinished runs' NaN left
+/// out); NaN when there is none.
+fn finite_mean(values: impl Iterator<Item = f64>) -> f64 {
+    let v: Vec<f64> = values.filter(|v| v.is_finite()).collect();
+    if v.is_empty() {
+        f64::NAN
+    } else {
+        v.iter().sum::<f64>() / v.len() as f64
+    }
+}
+
+/// The panels of a sweep's `figure`: for each, `metric` of its combinations
+/// at its x values, a line per seed (NaN where a run has not finished) and
+/// their mean when there are several seeds.
+pub fn figure_series(
+    sweep: &Sweep,
+    results: &[(RunSpec, Option<RunResult>)],
+    metric: &str,
+) -> Vec<crate::plot::SeriesPanel> {
+    let n_seeds = sweep.seeds.len().max(1);
+    let seeds: Vec<Option<u64>> = if sweep.seeds.is_empty() {
+        vec![None]
+    } else {
+        sweep.seeds.iter().copied().map(Some).collect()
+    };
+    let at = |combination: usize, seed: Option<u64>| -> f64 {
+        results
+            .iter()
+            .find(|(r, _)| r.index / n_seeds == combination && r.seed == seed)
+            .and_then(|(_, res)| res.as_ref())
+            .map_or(f64::NAN, |res| res.metric(metric))
+    };
+    sweep
+        .figure
+        .iter()
+        .map(|p| {
+            // points in order of x
+            let mut order: Vec<usize> = (0..p.runs.len()).collect();
+            order.sort_by(|&a, &b| p.x[a].total_cmp(&p.x[b]));
+            let mut lines: Vec<(String, Vec<f64>)> = seeds
+                .iter()
+                .map(|&s| {
+                    let name = s.map_or_else(|| "run".into(), |s| format!("seed {s}"));
+                    (name, order.iter().map(|&i| at(p.runs[i], s)).collect())
+                })
+                .collect();
+            if seeds.len() > 1 {
+                let mean = order
+                    .iter()
+                    .map(|&i| finite_mean(seeds.iter().map(|&s| at(p.runs[i], s))))
+                    .collect();
+                lines.push(("mean".into(), mean));
+            }
+            crate::plot::SeriesPanel {
+                title: format!("{}: {metric}", p.title),
+                x_label: p.x_label.clone(),
+                x: order.iter().map(|&i| p.x[i]).collect(),
+                lines,
+            }
+        })
+        .collect()
 }
 
 /// The `sbatch` array script of the sweep in `dir`: one task per run, each

@@ -40,6 +40,11 @@ pub struct WmCheckpointMeta {
     pub libtorch_version: String,
     /// Validation x0 loss at save time (None before the first validation).
     pub val_loss: Option<f64>,
+    /// An inference copy (`checkpoint strip`): the EMA denoiser and the
+    /// normalization only, no live model nor Adam moments; it plans, evaluates
+    /// and exports like its source but cannot resume training.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub inference_only: bool,
 }
 
 /// A world-model checkpoint read from disk.
@@ -83,6 +88,24 @@ impl WmCheckpoint {
     /// Copy `prefix.*` (`model` or `ema`) into `net`.
     pub fn load_net(&self, prefix: &str, net: &Denoiser) -> Result<(), WmError> {
         Ok(self.file.copy_into(prefix, net.named_parameters())?)
+    }
+
+    /// Write the inference copy of this checkpoint to `out` (sealed): the
+    /// `ema.*` and `norm.*` tensors and the record marked `inference_only`, a
+    /// quarter of a training checkpoint's size. What reads a world model for
+    /// planning (`WorldModel::load`, the unified policy, `eval world-model`,
+    /// `export`) reads it as its source.
+    pub fn write_inference_copy(&self, out: &Path) -> Result<(), WmError> {
+        let named: Vec<(String, tch::Tensor)> = self
+            .file
+            .names()
+            .into_iter()
+            .filter(|n| n.starts_with("ema.") || n.starts_with("norm."))
+            .map(|n| Ok((n.to_string(), self.file.tensor(n)?.shallow_clone())))
+            .collect::<Result<_, WmError>>()?;
+        let mut meta = self.meta().clone();
+        meta.inference_only = true;
+        Ok(crate::checkpoint::save_named(out, named, &meta)?)
     }
 
     /// The saved normalization.

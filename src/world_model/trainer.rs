@@ -168,6 +168,14 @@ impl WmTrainer {
         let (mut iteration, mut sequences, mut wall_offset, mut last_val) = (0, 0, 0.0, None);
         if let Some(ck) = resume {
             let m = ck.meta();
+            if m.inference_only {
+                return Err(WmError::Invalid(format!(
+                    "{}: an inference copy (`checkpoint strip`: the EMA weights alone, no \
+                     live model nor optimizer state) cannot resume training; resume from \
+                     the run's own checkpoint",
+                    ck.path().display()
+                )));
+            }
             if m.dims != dims {
                 return Err(WmError::Invalid(format!(
                     "{}: saved for dims ({}), the dataset has ({dims})",
@@ -387,6 +395,7 @@ impl WmTrainer {
                 .map_err(|e| WmError::Invalid(e.to_string()))?,
             libtorch_version: env!("DREAMPOLICY_LIBTORCH_VERSION").to_string(),
             val_loss: self.last_val.map(|v| v.loss),
+            inference_only: false,
         };
         let mut named = Vec::new();
         for (n, t) in self.net.named_parameters() {
