@@ -582,3 +582,71 @@ fn a_unified_env_on_another_scan_grid_is_refused() {
         .expect("another grid than the world model's");
     assert!(e.to_string().contains("scan_grid"), "{e}");
 }
+
+/// `unified.scandots`: the policy reads `[plan | scandots]`, and the distilled
+/// student (a policy reading the scandots, of the small config's layout)
+/// transferred into it acts and values exactly as the student does on the
+/// env's own scandots: the plan enters its scan encoder through zero columns,
+/// the plan's normalizer statistics are the student's actor-state ones.
+#[test]
+fn a_scandot_reading_policy_transfers_into_a_unified_policy_reading_plan_and_scandots() {
+    let _t = torch_lock();
+    use dreampolicy::env::obs::SCAN_DIM;
+    use dreampolicy::rl::checkpoint::Checkpoint;
+    use dreampolicy::rl::{Agent, VecTask};
+    let student = "models/checkpoints/dagger/checkpoints/latest.pt";
+    let cfg = common::load_config(
+        "unified/small.yaml",
+        &[
+            "env.n_envs=3",
+            "unified.scandots=true",
+            &format!("train.init_checkpoint={student}"),
+        ],
+    );
+    let ck = Checkpoint::read(std::path::Path::new(student)).unwrap();
+    let mut task = dreampolicy::unified::task::UnifiedTask::new(&cfg).unwrap();
+    assert_eq!(task.dims().scan, 8 * OBS_DIM + SCAN_DIM);
+    let n = task.n_envs();
+    let mut old = Agent::new(&ck.config().unwrap().policy, task.env().dims(), n, true);
+    ck.load_agent(&mut old).unwrap();
+    let mut new = Agent::new(&cfg.policy, task.dims(), n, true);
+    let t = ck.transfer_agent(&mut new).unwrap();
+    assert_eq!(t.widened, ["scan_actor.0.weight", "scan_critic.0.weight"]);
+    assert!(t.fresh.is_empty(), "{:?}", t.fresh);
+    // the plan's normalizer is the actor state's, tiled; the scandots' the student's
+    assert_eq!(new.scan_norm.mean[..OBS_DIM], old.obs_norm.mean[..]);
+    assert_eq!(
+        new.scan_norm.var[7 * OBS_DIM..8 * OBS_DIM],
+        old.obs_norm.var[..]
+    );
+    assert_eq!(new.scan_norm.mean[8 * OBS_DIM..], old.scan_norm.mean[..]);
+    assert_eq!(new.scan_norm.count, old.scan_norm.count);
+    for a in [&mut old, &mut new] {
+        a.set_frozen(true);
+    }
+    old.reset_history(task.env());
+    new.reset_history(&task);
+    for _ in 0..6 {
+        // the task's rows end with the env's scandots
+        let (s, e) = (task.scan(), &task.env().scan);
+        let row = task.dims().scan;
+        for i in 0..n {
+            assert_eq!(
+                s[i * row + 8 * OBS_DIM..(i + 1) * row],
+                e[i * SCAN_DIM..(i + 1) * SCAN_DIM]
+            );
+        }
+        old.prepare(task.env());
+        new.prepare(&task);
+        let (a, b) = (old.act_mean(), new.act_mean());
+        assert!(common::max_abs_diff(&a, &b) < 1e-6);
+        let (vo, vn) = (
+            old.values_of(task.env().critic(), &task.env().scan),
+            new.values_of(task.critic(), task.scan()),
+        );
+        assert!(common::max_abs_diff(&vo, &vn) < 1e-5, "{vo:?} {vn:?}");
+        task.step(&a);
+        old.after_step(task.env());
+        new.after_step(&task);
+    }
+}

@@ -400,19 +400,33 @@ impl Checkpoint {
     /// encoder may grow the same way, its latent included: the new latent units
     /// enter the actor's and critic's first layers through zero columns; so may
     /// an MLP history encoder, and its history may be longer: the older states
-    /// it adds enter through zero columns. Any other
+    /// it adds enter through zero columns. A scan slot may grow at its front
+    /// (a unified policy reading `[plan | scandots]` from a policy reading the
+    /// scandots, MLP encoders): the new inputs enter the scan encoders' first
+    /// layers through zero columns, and their normalizer statistics are the
+    /// actor-state normalizer's, tiled. Any other
     /// difference is an error naming the tensor.
     pub fn transfer_agent(&self, agent: &mut Agent) -> Result<Transfer, RlError> {
         let src_cfg = self.config()?;
         let src_scan = src_cfg.policy.scan_encoder.enabled && self.meta.dims.scan > 0;
         let dims = agent.dims();
+        let mlp = |k: ScanEncoderKind| k == ScanEncoderKind::Mlp;
+        // a scan slot that grows at its front (MLP encoders): a unified policy
+        // reading `[plan | scandots]` from a specialist or student reading the
+        // scandots; the new inputs enter the encoders through zero columns
+        let scan_front = (src_scan
+            && agent.policy.uses_scan()
+            && dims.scan > self.meta.dims.scan
+            && mlp(src_cfg.policy.scan_encoder.kind)
+            && mlp(agent.policy.cfg.scan_encoder.kind))
+        .then(|| (dims.scan - self.meta.dims.scan) as i64);
         // a policy without scandots may go to a task whose scan slot differs
         // (the unified policy's plan): its scan encoder starts fresh
         let same = |a: TaskDims, b: TaskDims| {
             a.obs == b.obs
                 && a.critic == b.critic
                 && a.action == b.action
-                && (!src_scan || a.scan == b.scan)
+                && (!src_scan || a.scan == b.scan || scan_front.is_some())
         };
         if !same(self.meta.dims, dims) {
             return Err(err(
@@ -433,7 +447,6 @@ impl Checkpoint {
         // columns at the end of the scan block
         let src_se = &src_cfg.policy.scan_encoder;
         let src_latent = if src_scan { src_se.latent() } else { 0 };
-        let mlp = |k: ScanEncoderKind| k == ScanEncoderKind::Mlp;
         let latent_grows = (src_scan
             && scan_out > src_latent
             && mlp(src_se.kind)
@@ -484,6 +497,20 @@ impl Checkpoint {
                 });
                 report.grown.push(name);
                 continue;
+            }
+            // a scan slot grown at its front: the encoders' first layers take
+            // the new inputs through zero columns before the old ones
+            if let Some(front) = scan_front {
+                if (name == "scan_actor.0.weight" || name == "scan_critic.0.weight")
+                    && ss.len() == 2
+                    && ns.len() == 2
+                    && ns[0] == ss[0]
+                    && ns[1] == ss[1] + front
+                {
+                    tch::no_grad(|| var.copy_(&with_zero_columns(src, 0, front)));
+                    report.widened.push(name);
+                    continue;
+                }
             }
             // a longer MLP history: the history is oldest first, so the new
             // (older) states enter through zero columns in front of the old ones
@@ -570,8 +597,16 @@ impl Checkpoint {
             if !take {
                 continue;
             }
-            let v = Vec::<f64>::try_from(&self.tensor(key)?.to_kind(Kind::Double))
-                .map_err(|e| err(&self.path, e.to_string()))?;
+            let read = |key: &str| -> Result<Vec<f64>, RlError> {
+                Vec::<f64>::try_from(&self.tensor(key)?.to_kind(Kind::Double))
+                    .map_err(|e| err(&self.path, e.to_string()))
+            };
+            let mut v = read(key)?;
+            if let (Some(front), "norm.scan") = (scan_front, key) {
+                v = front_grown_norm(&v, &read("norm.obs")?, front as usize, d.obs).ok_or_else(
+                    || err(&self.path, "'norm.scan' or 'norm.obs' has the wrong size"),
+                )?;
+            }
             let frozen = slot.frozen;
             *slot = RunningNorm::from_vec(dim, &v)
                 .ok_or_else(|| err(&self.path, format!("'{key}' does not fit {dim} dims")))?;
@@ -623,6 +658,29 @@ impl Checkpoint {
 
 /// `w` (`[out, in]`) with `n` zero columns inserted before column `at`: the
 /// weights of inputs added there, silent until training moves them.
+/// A scan normalizer's `[mean, var, count]` grown by `front` inputs before
+/// the old ones: predicted states (a whole number of `obs_dim` states) take the
+/// actor-state normalizer's statistics, tiled (they are states of the same
+/// space), anything else mean 0 and variance 1; the count stays the source's.
+fn front_grown_norm(scan: &[f64], obs: &[f64], front: usize, obs_dim: usize) -> Option<Vec<f64>> {
+    if scan.len() % 2 != 1 || obs.len() != 2 * obs_dim + 1 {
+        return None;
+    }
+    let old = scan.len() / 2;
+    let (mean, var) = if front.is_multiple_of(obs_dim) {
+        let tile = |v: &[f64]| v.iter().copied().cycle().take(front).collect::<Vec<f64>>();
+        (tile(&obs[..obs_dim]), tile(&obs[obs_dim..2 * obs_dim]))
+    } else {
+        (vec![0.0; front], vec![1.0; front])
+    };
+    let mut out = mean;
+    out.extend_from_slice(&scan[..old]);
+    out.extend(var);
+    out.extend_from_slice(&scan[old..2 * old]);
+    out.push(scan[2 * old]);
+    Some(out)
+}
+
 fn with_zero_columns(w: &Tensor, at: i64, n: i64) -> Tensor {
     let (rows, cols) = (w.size()[0], w.size()[1]);
     let zeros = Tensor::zeros([rows, n], (w.kind(), w.device()));

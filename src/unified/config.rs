@@ -25,6 +25,16 @@ pub struct UnifiedConfig {
     /// the plan); default: all `H`.
     #[serde(default)]
     pub future_states: Option<usize>,
+    /// The policy also reads the live scandots, after the plan in its future
+    /// encoder's input (`[plan | scandots]`), as the specialist it inherits
+    /// its architecture from does (the paper's appendix: "inherited from" the
+    /// specialist's network, plus the future encoder). Then a specialist or the
+    /// distilled student (`train.init_checkpoint`) starts it: its scan
+    /// encoder's weights carry over and the plan enters through zero columns,
+    /// so iteration 0 walks the terrains that checkpoint walks. Default: the
+    /// plan alone (the paper's equation).
+    #[serde(default)]
+    pub scandots: bool,
     #[serde(default)]
     pub tracking: TrackingConfig,
     #[serde(default)]

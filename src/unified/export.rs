@@ -131,6 +131,13 @@ pub fn write_bundle(ck: &Checkpoint, dir: &Path) -> Result<UnifiedBundleInfo, Rl
         )));
     }
     let u = UnifiedConfig::of(&cfg)?;
+    if u.scandots {
+        return Err(RlError::Invalid(format!(
+            "{}: this unified policy reads the scandots beside its plan (`unified.scandots`); \
+             the bundle's deployment loop feeds the plan alone, so `export` does not write it yet",
+            ck.path.display()
+        )));
+    }
     let mut wm = WorldModel::load(Path::new(&u.world_model), Device::Cpu)
         .map_err(|e| RlError::Invalid(format!("unified.world_model: {e}")))?;
     let mut agent = Agent::new(&cfg.policy, ck.meta.dims, 1, cfg.ppo.normalize_obs);

@@ -15,7 +15,8 @@
 //!    old or gone get a new one, in one batched world-model call from their
 //!    last `K` states and live scandots;
 //! 4. the policy's "scan" input is the plan: the first `future_states`
-//!    predicted states (the future encoder is the agent's scan encoder, an MLP).
+//!    predicted states (the future encoder is the agent's scan encoder, an MLP),
+//!    followed by the env's live scandots with `unified.scandots`.
 //!
 //! The world model's history holds the env's actor states (with its
 //! observation noise: what a robot's sensors give). Each plan made at `t` also
@@ -92,6 +93,8 @@ pub struct UnifiedTask {
     noise: Noise,
     /// Predicted states the policy reads.
     future: usize,
+    /// Whether the live scandots follow them (`unified.scandots`).
+    scandots: bool,
     dt: f64,
     scan: Vec<f32>,
     final_scan: Vec<f32>,
@@ -134,6 +137,13 @@ impl UnifiedTask {
                 "unified.future_states {future} is more than the world model's horizon {h}"
             )));
         }
+        if u.scandots && cfg.policy.scan_encoder.kind != crate::rl::config::ScanEncoderKind::Mlp {
+            return Err(RlError::Invalid(
+                "unified.scandots: the future encoder then reads [plan | scandots], which \
+                 only an MLP encoder takes (policy.scan_encoder.kind: mlp)"
+                    .into(),
+            ));
+        }
         let env = match env {
             Some(env) => env,
             None => VecEnv::new(&cfg.env)?,
@@ -150,9 +160,10 @@ impl UnifiedTask {
             plan: Plan::new(n, h, OBS_DIM, u.replan_every),
             noise: Noise::new(u.seed),
             future,
+            scandots: u.scandots,
             dt,
-            scan: vec![0.0; n * future * OBS_DIM],
-            final_scan: vec![0.0; n * future * OBS_DIM],
+            scan: vec![0.0; n * scan_row(future, u.scandots)],
+            final_scan: vec![0.0; n * scan_row(future, u.scandots)],
             outcomes: vec![Outcome::default(); n],
             prev_clean: vec![0.0; n * OBS_DIM],
             real: Vec::new(),
@@ -323,13 +334,23 @@ impl UnifiedTask {
         self.sums.plans += due.len();
     }
 
-    /// The policy's future input: the first `future` states of each plan.
+    /// The policy's future input: the first `future` states of each plan,
+    /// then (`unified.scandots`) the env's scandots.
     fn write_scan(&mut self) {
-        let w = self.future * OBS_DIM;
+        let (w, row) = (self.future * OBS_DIM, self.scan_width());
         for i in 0..self.env.n_envs() {
             let (plan, _) = self.plan.future(i);
-            self.scan[i * w..(i + 1) * w].copy_from_slice(&plan[..w]);
+            let dst = &mut self.scan[i * row..(i + 1) * row];
+            dst[..w].copy_from_slice(&plan[..w]);
+            if self.scandots {
+                dst[w..].copy_from_slice(&self.env.scan[i * SCAN_DIM..(i + 1) * SCAN_DIM]);
+            }
         }
+    }
+
+    /// The width of one env's row of the policy's future input.
+    fn scan_width(&self) -> usize {
+        scan_row(self.future, self.scandots)
     }
     fn step_inner(&mut self, actions: &[f32]) -> StepInfo {
         let n = self.env.n_envs();
@@ -379,12 +400,17 @@ impl UnifiedTask {
         }
         // histories and plans
         self.plan.advance();
-        let fw = self.future * d;
+        let (fw, row) = (self.future * d, self.scan_width());
         for i in 0..n {
             let obs = &self.env.obs[i * d..(i + 1) * d];
             if self.outcomes[i].episode_done {
                 let (plan, _) = self.plan.future(i);
-                self.final_scan[i * fw..(i + 1) * fw].copy_from_slice(&plan[..fw]);
+                let dst = &mut self.final_scan[i * row..(i + 1) * row];
+                dst[..fw].copy_from_slice(&plan[..fw]);
+                if self.scandots {
+                    dst[fw..]
+                        .copy_from_slice(&self.env.final_scan[i * SCAN_DIM..(i + 1) * SCAN_DIM]);
+                }
                 self.plan.invalidate(i);
                 self.history.reset(i, obs);
             } else {
@@ -403,6 +429,12 @@ impl UnifiedTask {
     }
 }
 
+/// One env's row of the policy's future input: `future` predicted states,
+/// then the scandots when the policy reads them.
+fn scan_row(future: usize, scandots: bool) -> usize {
+    future * OBS_DIM + if scandots { SCAN_DIM } else { 0 }
+}
+
 /// Env `i`'s noise-free state: the first `OBS_DIM` entries of its critic row.
 fn clean_state(critic: &[f32], i: usize) -> &[f32] {
     &critic[i * CRITIC_DIM..i * CRITIC_DIM + OBS_DIM]
@@ -414,7 +446,7 @@ impl VecTask for UnifiedTask {
         TaskDims {
             obs: OBS_DIM,
             critic: CRITIC_DIM,
-            scan: self.future * OBS_DIM,
+            scan: self.scan_width(),
             action: crate::robot::NUM_JOINTS,
         }
     }
