@@ -486,6 +486,26 @@ fn a_figure_plots_chosen_runs_against_their_own_x_and_bad_panels_are_refused() {
         .flat_map(|l| &l.1)
         .all(|v| v.is_finite()));
 
+    // a list sweep grown at its end keeps its runs and trains the new one only
+    let grown = s.write(
+        "f.yaml",
+        &text.replace("3.0e-4, 1.0e-3, 3.0e-3]", "3.0e-4, 1.0e-3, 3.0e-3, 1.0e-2]"),
+    );
+    let out = bin()
+        .args(["sweep", "run", "--jobs", "2", "--threads", "2", "--out"])
+        .arg(&dir)
+        .arg(&grown)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert_eq!(err.matches("starting").count(), 2, "{err}");
+    assert!(
+        err.contains("starting 006-lr=0.01-seed=1") && err.contains("starting 007-lr=0.01-seed=2"),
+        "{err}"
+    );
+    assert_eq!(err.matches("to run").count(), 2, "{err}");
+    assert!(!err.contains("resuming"), "{err}");
     // a run the sweep does not have, x of another length
     for (bad, msg) in [
         (

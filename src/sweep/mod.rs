@@ -685,17 +685,21 @@ impl SweepDir {
     }
 
     /// Write the expanded sweep and its runs. A directory made from a different
-    /// sweep is refused: its runs would mix with these.
+    /// sweep is refused: its runs would mix with these. A sweep may grow at its
+    /// end (list mode: values appended to every axis): the runs already there
+    /// keep their index, name and directory.
     pub fn prepare(&self, sweep: &Sweep) -> Result<Vec<RunSpec>, SweepError> {
         let runs = sweep.runs();
         if self.sweep_file().exists() {
             let old = Sweep::load(&self.sweep_file())?;
-            if old.runs() != runs || old.base != sweep.base || old.trainer != sweep.trainer {
+            let old_runs = old.runs();
+            let extends = old_runs.len() <= runs.len() && runs[..old_runs.len()] == old_runs[..];
+            if !extends || old.base != sweep.base || old.trainer != sweep.trainer {
                 return Err(SweepError::Invalid {
                     path: self.path.display().to_string(),
                     message:
-                        "this directory holds a different sweep (other runs, base or trainer): \
-                              choose another --out, or delete it"
+                        "this directory holds a different sweep (other runs, base or trainer; \
+                         only runs appended at the end may be added): choose another --out, or delete it"
                             .into(),
                 });
             }
