@@ -173,15 +173,20 @@ fn a_mistyped_key_or_value_stops_the_sweep_before_any_run() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("learning_rate"));
 }
 
-/// `sweep run --jobs N --threads N` of `file` into `dir`, which must succeed.
-fn sweep_run_ok(dir: &Path, file: &Path, jobs: usize) {
+/// `sweep run --jobs N --threads N` of `file` into `dir`, which must succeed;
+/// returns its stdout (the collected table) and stderr (the runs' states,
+/// starts and resumes).
+fn sweep_run_ok(dir: &Path, file: &Path, jobs: usize) -> (String, String) {
     let n = jobs.to_string();
-    run_ok(
-        bin()
-            .args(["sweep", "run", "--jobs", &n, "--threads", &n, "--out"])
-            .arg(dir)
-            .arg(file),
-    );
+    let out = bin()
+        .args(["sweep", "run", "--jobs", &n, "--threads", &n, "--out"])
+        .arg(dir)
+        .arg(file)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "{err}");
+    (String::from_utf8_lossy(&out.stdout).into_owned(), err)
 }
 
 fn metrics_iterations(run: &Path) -> Vec<f64> {
@@ -225,14 +230,7 @@ fn a_local_sweep_runs_skips_finished_runs_resumes_an_interrupted_one_and_collect
             .iteration;
     assert!(killed_at < 30);
 
-    let out = bin()
-        .args(["sweep", "run", "--jobs", "2", "--threads", "2", "--out"])
-        .arg(&dir)
-        .arg(&file)
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{err}");
+    let (table, err) = sweep_run_ok(&dir, &file, 2);
     assert!(err.contains(&format!("starting {}", runs[0].name)), "{err}");
     assert!(err.contains(&format!("resuming {}", runs[1].name)), "{err}");
     for r in &runs {
@@ -244,7 +242,6 @@ fn a_local_sweep_runs_skips_finished_runs_resumes_an_interrupted_one_and_collect
         assert_eq!(its.len(), 30, "{}", r.name);
         assert!(its.windows(2).all(|w| w[1] == w[0] + 1.0), "{}", r.name);
     }
-    let table = String::from_utf8_lossy(&out.stdout);
     assert!(
         table.contains("| lr | runs | mean_return | mean_episode_length |"),
         "{table}"
@@ -491,14 +488,7 @@ fn a_figure_plots_chosen_runs_against_their_own_x_and_bad_panels_are_refused() {
         "f.yaml",
         &text.replace("3.0e-4, 1.0e-3, 3.0e-3]", "3.0e-4, 1.0e-3, 3.0e-3, 1.0e-2]"),
     );
-    let out = bin()
-        .args(["sweep", "run", "--jobs", "2", "--threads", "2", "--out"])
-        .arg(&dir)
-        .arg(&grown)
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{err}");
+    let (_, err) = sweep_run_ok(&dir, &grown, 2);
     assert_eq!(err.matches("starting").count(), 2, "{err}");
     assert!(
         err.contains("starting 006-lr=0.01-seed=1") && err.contains("starting 007-lr=0.01-seed=2"),

@@ -656,8 +656,6 @@ impl Checkpoint {
     }
 }
 
-/// `w` (`[out, in]`) with `n` zero columns inserted before column `at`: the
-/// weights of inputs added there, silent until training moves them.
 /// A scan normalizer's `[mean, var, count]` grown by `front` inputs before
 /// the old ones: predicted states (a whole number of `obs_dim` states) take the
 /// actor-state normalizer's statistics, tiled (they are states of the same
@@ -681,6 +679,8 @@ fn front_grown_norm(scan: &[f64], obs: &[f64], front: usize, obs_dim: usize) -> 
     Some(out)
 }
 
+/// `w` (`[out, in]`) with `n` zero columns inserted before column `at`: the
+/// weights of inputs added there, silent until training moves them.
 fn with_zero_columns(w: &Tensor, at: i64, n: i64) -> Tensor {
     let (rows, cols) = (w.size()[0], w.size()[1]);
     let zeros = Tensor::zeros([rows, n], (w.kind(), w.device()));

@@ -533,13 +533,19 @@ impl Sweep {
         }
     }
 
-    /// Every run of the sweep, in index order: the combinations, each once per seed.
-    pub fn runs(&self) -> Vec<RunSpec> {
-        let seeds: Vec<Option<u64>> = if self.seeds.is_empty() {
+    /// The seeds each combination runs with, in order (None: the base
+    /// config's seed, once).
+    fn run_seeds(&self) -> Vec<Option<u64>> {
+        if self.seeds.is_empty() {
             vec![None]
         } else {
             self.seeds.iter().copied().map(Some).collect()
-        };
+        }
+    }
+
+    /// Every run of the sweep, in index order: the combinations, each once per seed.
+    pub fn runs(&self) -> Vec<RunSpec> {
+        let seeds = self.run_seeds();
         let mut out = Vec::new();
         for combo in self.combinations() {
             for &seed in &seeds {
@@ -1218,12 +1224,8 @@ pub fn figure_series(
     results: &[(RunSpec, Option<RunResult>)],
     metric: &str,
 ) -> Vec<crate::plot::SeriesPanel> {
-    let n_seeds = sweep.seeds.len().max(1);
-    let seeds: Vec<Option<u64>> = if sweep.seeds.is_empty() {
-        vec![None]
-    } else {
-        sweep.seeds.iter().copied().map(Some).collect()
-    };
+    let seeds = sweep.run_seeds();
+    let n_seeds = seeds.len();
     let at = |combination: usize, seed: Option<u64>| -> f64 {
         results
             .iter()

@@ -340,11 +340,9 @@ impl UnifiedTask {
         let (w, row) = (self.future * OBS_DIM, self.scan_width());
         for i in 0..self.env.n_envs() {
             let (plan, _) = self.plan.future(i);
-            let dst = &mut self.scan[i * row..(i + 1) * row];
-            dst[..w].copy_from_slice(&plan[..w]);
-            if self.scandots {
-                dst[w..].copy_from_slice(&self.env.scan[i * SCAN_DIM..(i + 1) * SCAN_DIM]);
-            }
+            let dots = &self.env.scan[i * SCAN_DIM..(i + 1) * SCAN_DIM];
+            let dots = self.scandots.then_some(dots);
+            write_row(&mut self.scan[i * row..(i + 1) * row], &plan[..w], dots);
         }
     }
 
@@ -405,12 +403,13 @@ impl UnifiedTask {
             let obs = &self.env.obs[i * d..(i + 1) * d];
             if self.outcomes[i].episode_done {
                 let (plan, _) = self.plan.future(i);
-                let dst = &mut self.final_scan[i * row..(i + 1) * row];
-                dst[..fw].copy_from_slice(&plan[..fw]);
-                if self.scandots {
-                    dst[fw..]
-                        .copy_from_slice(&self.env.final_scan[i * SCAN_DIM..(i + 1) * SCAN_DIM]);
-                }
+                let dots = &self.env.final_scan[i * SCAN_DIM..(i + 1) * SCAN_DIM];
+                let dots = self.scandots.then_some(dots);
+                write_row(
+                    &mut self.final_scan[i * row..(i + 1) * row],
+                    &plan[..fw],
+                    dots,
+                );
                 self.plan.invalidate(i);
                 self.history.reset(i, obs);
             } else {
@@ -433,6 +432,15 @@ impl UnifiedTask {
 /// then the scandots when the policy reads them.
 fn scan_row(future: usize, scandots: bool) -> usize {
     future * OBS_DIM + if scandots { SCAN_DIM } else { 0 }
+}
+
+/// One env's row `dst` of the policy's future input: the plan's states it
+/// reads, then its scandots with `unified.scandots`.
+fn write_row(dst: &mut [f32], plan: &[f32], dots: Option<&[f32]>) {
+    dst[..plan.len()].copy_from_slice(plan);
+    if let Some(dots) = dots {
+        dst[plan.len()..].copy_from_slice(dots);
+    }
 }
 
 /// Env `i`'s noise-free state: the first `OBS_DIM` entries of its critic row.
