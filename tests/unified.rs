@@ -650,3 +650,52 @@ fn a_scandot_reading_policy_transfers_into_a_unified_policy_reading_plan_and_sca
         new.after_step(&task);
     }
 }
+
+/// `export` of a policy reading `[plan | scandots]` (the committed
+/// unified_student1): `unified.json` says so and counts the plan's states
+/// without the scandots, and `policy.pt` on the task's obs, history and
+/// `[plan | scandots]` rows gives the agent's actions.
+#[test]
+fn a_unified_policy_reading_the_scandots_exports_with_them() {
+    let _t = torch_lock();
+    use dreampolicy::env::obs::SCAN_DIM;
+    use dreampolicy::rl::checkpoint::Checkpoint;
+    use dreampolicy::rl::{Agent, VecTask};
+    use tch::Tensor;
+    let path = "models/checkpoints/unified_student1/checkpoints/latest.pt";
+    let ck = Checkpoint::read(std::path::Path::new(path)).unwrap();
+    let dir = common::Scratch::new("uni-scan-export");
+    let info = dreampolicy::unified::export::write_bundle(&ck, &dir.0.join("b")).unwrap();
+    assert!(info.scandots);
+    assert_eq!(info.plan_states, 8);
+    let text = std::fs::read_to_string(dir.0.join("b/unified.json")).unwrap();
+    let spec: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(spec["policy"]["scandots"], true);
+    assert_eq!(spec["policy"]["plan_states"], 8);
+    assert!(spec["loop"].as_str().unwrap().contains("policy.scandots"));
+
+    let mut cfg = ck.config().unwrap();
+    cfg.env.n_envs = 2;
+    let mut task = dreampolicy::unified::task::UnifiedTask::new(&cfg).unwrap();
+    let (n, d) = (task.n_envs(), task.dims());
+    assert_eq!(d.scan, 8 * OBS_DIM + SCAN_DIM);
+    let mut agent = Agent::new(&cfg.policy, d, n, cfg.ppo.normalize_obs);
+    ck.load_agent(&mut agent).unwrap();
+    agent.set_frozen(true);
+    agent.reset_history(&task);
+    let k = cfg.policy.history.length as i64;
+    let policy = tch::CModule::load(dir.0.join("b/policy.pt")).unwrap();
+    for _ in 0..3 {
+        agent.prepare(&task);
+        let ours = agent.act_mean();
+        let obs = Tensor::from_slice(task.obs()).view([n as i64, d.obs as i64]);
+        let hist = Tensor::from_slice(agent.history()).view([n as i64, k, d.obs as i64]);
+        let rows = Tensor::from_slice(VecTask::scan(&task)).view([n as i64, d.scan as i64]);
+        let theirs = policy.forward_ts(&[obs, hist, rows]).unwrap();
+        let theirs = Vec::<f32>::try_from(theirs.contiguous().view([-1])).unwrap();
+        let worst = common::max_abs_diff(&ours, &theirs);
+        assert!(worst < 1e-4, "policy.pt differs from the agent by {worst}");
+        task.step(&ours);
+        agent.after_step(&task);
+    }
+}

@@ -5,7 +5,9 @@
 //! * `policy.pt`: the actor, TorchScript, `forward(obs [B, 98], history
 //!   [B, K_p, 98], plan [B, F * 98]) -> action mean [B, 29]` on raw inputs
 //!   (the same contract as a specialist's `policy.pt`, the plan where a
-//!   specialist reads scandots: the first `F` predicted states, raw);
+//!   specialist reads scandots: the first `F` predicted states, raw, then,
+//!   for a policy trained with `unified.scandots`, the env's 187 scandots as
+//!   the denoiser reads them: `policy.scandots` in `unified.json`);
 //! * `denoiser.pt`: the world model's guided x0 prediction, TorchScript,
 //!   `forward(x_n [B, H, 98] normalized, history [B, K, 98] raw, n [B] float,
 //!   scandots [B, 187] raw) -> x0 [B, H, 98] normalized`, with the state and
@@ -44,8 +46,9 @@ sqrt(1 - ab[n]), x = sqrt(ab[m]) x0 + sqrt(1 - ab[m]) eps; DDPM (m = n - 1): x =
 sqrt(ab[m]) beta[n] / (1 - ab[n]) x0 + sqrt(1 - beta[n]) (1 - ab[m]) / (1 - ab[n]) x + \
 sqrt(beta[n] (1 - ab[m]) / (1 - ab[n])) z, z standard normal. The plan is x * state_std + \
 state_mean, its first state the next one. Between re-plans the plan drops its first state each \
-control step and repeats its last. The policy's plan input is the plan's first plan_states \
-states, flattened.";
+control step and repeats its last. The policy's third input is the plan's first plan_states \
+states, flattened, followed, when policy.scandots is true, by the scandots (the same 187 values \
+the denoiser reads).";
 
 /// The policy part of `unified.json`.
 #[derive(Debug, Clone, Serialize)]
@@ -57,6 +60,8 @@ pub struct PolicySpec {
     pub history_len: usize,
     /// `F`: predicted states the policy reads.
     pub plan_states: usize,
+    /// Whether the policy's third input ends with the scandots (`unified.scandots`).
+    pub scandots: bool,
     pub action_dim: usize,
 }
 
@@ -115,6 +120,8 @@ pub struct UnifiedBundleInfo {
     pub files: Vec<String>,
     pub history_len: usize,
     pub plan_states: usize,
+    /// The policy reads the scandots after the plan.
+    pub scandots: bool,
     pub world_model_history: usize,
     pub horizon: usize,
     pub replan_every: usize,
@@ -131,20 +138,27 @@ pub fn write_bundle(ck: &Checkpoint, dir: &Path) -> Result<UnifiedBundleInfo, Rl
         )));
     }
     let u = UnifiedConfig::of(&cfg)?;
-    if u.scandots {
-        return Err(RlError::Invalid(format!(
-            "{}: this unified policy reads the scandots beside its plan (`unified.scandots`); \
-             the bundle's deployment loop feeds the plan alone, so `export` does not write it yet",
-            ck.path.display()
-        )));
-    }
     let mut wm = WorldModel::load(Path::new(&u.world_model), Device::Cpu)
         .map_err(|e| RlError::Invalid(format!("unified.world_model: {e}")))?;
     let mut agent = Agent::new(&cfg.policy, ck.meta.dims, 1, cfg.ppo.normalize_obs);
     ck.load_agent(&mut agent)?;
     let (s, c) = wm.net.dims();
     let (k, h) = (wm.history(), wm.horizon());
-    let plan_states = ck.meta.dims.scan / s;
+    // the policy's scan slot: F predicted states, then the scandots if it reads them
+    let plan_dims = ck
+        .meta
+        .dims
+        .scan
+        .saturating_sub(if u.scandots { c } else { 0 });
+    if plan_dims == 0 || plan_dims % s != 0 {
+        return Err(RlError::Invalid(format!(
+            "{}: the policy's plan input ({} floats) is not a whole number of the world \
+             model's {s}-float states",
+            ck.path.display(),
+            ck.meta.dims.scan
+        )));
+    }
+    let plan_states = plan_dims / s;
 
     std::fs::create_dir_all(dir).map_err(|source| RlError::Io {
         path: dir.to_path_buf(),
@@ -179,6 +193,7 @@ pub fn write_bundle(ck: &Checkpoint, dir: &Path) -> Result<UnifiedBundleInfo, Rl
             obs_dim: policy.obs_dim,
             history_len: policy.history_len,
             plan_states,
+            scandots: u.scandots,
             action_dim: policy.action_dim,
         },
         world_model: WorldModelSpec {
@@ -220,6 +235,7 @@ pub fn write_bundle(ck: &Checkpoint, dir: &Path) -> Result<UnifiedBundleInfo, Rl
         files: vec![POLICY_FILE.into(), DENOISER_FILE.into(), SPEC_FILE.into()],
         history_len: policy.history_len,
         plan_states,
+        scandots: u.scandots,
         world_model_history: k,
         horizon: h,
         replan_every: u.replan_every,
