@@ -4,7 +4,7 @@
 //! buffers across resets.
 mod common;
 
-use dreampolicy::env::obs::{CRITIC_DIM, GRAVITY, OBS_DIM};
+use dreampolicy::env::obs::{COMMAND, CRITIC_DIM, GRAVITY, OBS_DIM};
 use dreampolicy::env::VecEnv;
 use dreampolicy::robot::NUM_JOINTS;
 use dreampolicy::terrain::TerrainKind;
@@ -85,6 +85,109 @@ fn targets_from_a_state_reproduce_the_simulated_bodies() {
         moving > 30 && tilted > 10,
         "moving {moving}, tilted {tilted}"
     );
+}
+
+/// `unified.tracking.base_velocity: command`: a state's pelvis moves at the
+/// command it holds, the robot's at its measured velocity. A state whose
+/// command is the robot's own heading-frame velocity gives the simulator's
+/// bodies (but for the pelvis's vertical speed, which a state does not hold),
+/// and a command 0.3 m/s faster than the robot costs the linear-velocity score
+/// exactly that error on every body, where the relative frame sees nothing.
+#[test]
+fn with_the_base_velocity_a_robot_slower_than_its_command_is_off_the_plan() {
+    let c = common::load_config(
+        "flat_small.yaml",
+        &[
+            "env.n_envs=4",
+            "env.observation.add_noise=false",
+            "env.domain_rand.enabled=false",
+        ],
+    );
+    let mut v = VecEnv::new(&c.env).unwrap();
+    let model = v.envs()[0].data().model().clone();
+    let mut rel = BodyFk::new(model.clone(), &c.env.observation.scales).unwrap();
+    let mut abs = BodyFk::new(model, &c.env.observation.scales)
+        .unwrap()
+        .with_base_velocity(true);
+    let sc = c.env.observation.scales.commands;
+    let sig = TrackingSigmas::default();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    let (n, mut checked, mut fast) = (v.n_envs(), 0, 0);
+    for t in 0..40 {
+        let a: Vec<f32> = (0..n * NUM_JOINTS)
+            .map(|_| rng.random_range(-1.0..1.0))
+            .collect();
+        v.step(&a);
+        if t % 4 != 3 {
+            continue;
+        }
+        for e in 0..n {
+            let d = v.envs()[e].data();
+            let (qpos, qvel) = (d.qpos().to_vec(), d.qvel().to_vec());
+            // the pelvis's velocity in its heading frame, from the free joint
+            let q = &qpos[3..7];
+            let yaw = f64::atan2(
+                2.0 * (q[0] * q[3] + q[1] * q[2]),
+                1.0 - 2.0 * (q[2] * q[2] + q[3] * q[3]),
+            );
+            let (sy, cy) = yaw.sin_cos();
+            let vp = [
+                cy * qvel[0] + sy * qvel[1],
+                -sy * qvel[0] + cy * qvel[1],
+                qvel[2],
+            ];
+            fast += usize::from(vp[0].hypot(vp[1]) > 0.2);
+            let sim = abs.from_qpos(&qpos, &qvel);
+            let sim_rel = rel.from_qpos(&qpos, &qvel);
+            for k in 0..N_TRACKED {
+                for i in 0..3 {
+                    let dv = sim.lin_vel[k][i] - sim_rel.lin_vel[k][i];
+                    assert!(
+                        (dv - vp[i]).abs() < 1e-6,
+                        "env {e} body {k}: {dv} vs {}",
+                        vp[i]
+                    );
+                }
+            }
+            let mut state = v.critic[e * CRITIC_DIM..e * CRITIC_DIM + OBS_DIM].to_vec();
+            state[COMMAND.start] = (vp[0] * sc[0]) as f32;
+            state[COMMAND.start + 1] = (vp[1] * sc[1]) as f32;
+            let planned = abs.from_state(&state);
+            for k in 0..N_TRACKED {
+                for i in 0..3 {
+                    let want = sim.lin_vel[k][i] - if i == 2 { vp[2] } else { 0.0 };
+                    let got = planned.lin_vel[k][i];
+                    assert!(
+                        (got - want).abs() < 2e-4,
+                        "env {e} body {k} axis {i}: {got} vs {want}"
+                    );
+                }
+            }
+            let on = TrackingErrors::between(&planned, &sim);
+            assert!(
+                (on.lin_vel - vp[2] * vp[2]).abs() < 1e-3,
+                "{} vs {}",
+                on.lin_vel,
+                vp[2] * vp[2]
+            );
+            // commanded 0.3 m/s faster forward than the robot goes
+            state[COMMAND.start] = ((vp[0] + 0.3) * sc[0]) as f32;
+            let ahead = TrackingErrors::between(&abs.from_state(&state), &sim);
+            assert!(
+                (ahead.lin_vel - on.lin_vel - 0.09).abs() < 1e-3,
+                "{} vs {}",
+                ahead.lin_vel,
+                on.lin_vel
+            );
+            assert!(ahead.scores(&sig)[2] < on.scores(&sig)[2]);
+            // the relative frame does not see the command
+            let r_on = TrackingErrors::between(&rel.from_state(&state), &sim_rel);
+            assert!(r_on.lin_vel < 1e-6, "{}", r_on.lin_vel);
+            checked += 1;
+        }
+    }
+    assert_eq!(checked, 40);
+    assert!(fast > 5, "only {fast} states moved faster than 0.2 m/s");
 }
 
 #[test]

@@ -63,6 +63,30 @@ pub struct TrackingConfig {
     /// Weights of position, orientation, linear and angular velocity.
     pub weights: [f64; 4],
     pub sigmas: TrackingSigmas,
+    /// What the bodies' linear velocities are measured against
+    /// ([`BaseVelocity`]); `relative` unless a config says otherwise (the
+    /// runs before 2026-12-07 were trained so).
+    pub base_velocity: BaseVelocity,
+}
+
+/// The frame of the linear-velocity term.
+///
+/// A state (98 floats) holds no base linear velocity, so a plan says how the
+/// bodies move against the pelvis, not how fast the robot goes.
+/// - `relative`: every body's velocity minus the pelvis's, in the heading
+///   frame, for plan and robot alike. Nothing in the tracking terms then pays
+///   for forward progress (unified_spec1/2 slowed from 0.64 to 0.41 m/s on the
+///   plane for a commanded 0.78).
+/// - `command`: heading-frame velocities with the base's own: the plan's
+///   pelvis moves at the command its `ŝ_{t+1}` holds (`v_x`, `v_y`), the
+///   robot's at its measured velocity, so a robot slower than its command is
+///   off the plan on every body.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BaseVelocity {
+    #[default]
+    Relative,
+    Command,
 }
 
 impl Default for TrackingConfig {
@@ -70,6 +94,7 @@ impl Default for TrackingConfig {
         TrackingConfig {
             weights: [1.0; 4],
             sigmas: TrackingSigmas::default(),
+            base_velocity: BaseVelocity::default(),
         }
     }
 }

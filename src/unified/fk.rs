@@ -9,7 +9,10 @@
 //! and none of the heading-frame quantities depends on them:
 //! * position `p_b = R_h^T (x_b − x_pelvis)`;
 //! * orientation `R_b` relative to the heading frame (`q_h^{-1} ⊗ q_b`);
-//! * linear velocity `v_b = R_h^T (ẋ_b − ẋ_pelvis)` (of the body's origin);
+//! * linear velocity `v_b = R_h^T (ẋ_b − ẋ_pelvis)` (of the body's origin),
+//!   or with [`BodyFk::with_base_velocity`] `v_b = R_h^T ẋ_b`, where a state's
+//!   pelvis moves at the command `(v_x, v_y, 0)` it holds
+//!   (`unified.tracking.base_velocity: command`);
 //! * angular velocity `ω_b = R_h^T ω_b^world`.
 //!
 //! [`BodyFk::from_state`] decodes `s` into a configuration with the pelvis at
@@ -22,7 +25,7 @@
 use std::sync::Arc;
 
 use crate::env::config::ObsScales;
-use crate::env::obs::{ANG_VEL, DOF_POS, DOF_VEL, GRAVITY, OBS_DIM};
+use crate::env::obs::{ANG_VEL, COMMAND, DOF_POS, DOF_VEL, GRAVITY, OBS_DIM};
 use crate::robot::{G1, NUM_JOINTS, TRACKED_BODIES};
 use crate::sim::{Data, Model, ObjType, SimError};
 
@@ -122,6 +125,9 @@ pub struct BodyFk {
     g1: G1,
     bodies: [usize; N_TRACKED],
     scales: ObsScales,
+    /// Heading-frame velocities with the base's own (`true`), or against the
+    /// pelvis (`false`, the default); see `unified.tracking.base_velocity`.
+    with_base_velocity: bool,
 }
 
 impl BodyFk {
@@ -138,7 +144,16 @@ impl BodyFk {
             g1,
             bodies,
             scales: scales.clone(),
+            with_base_velocity: false,
         })
+    }
+
+    /// Measure linear velocities in the heading frame with the base's own
+    /// (a state's base then moves at the command it holds) instead of against
+    /// the pelvis.
+    pub fn with_base_velocity(mut self, on: bool) -> BodyFk {
+        self.with_base_velocity = on;
+        self
     }
 
     /// The observation scales states are decoded with.
@@ -171,8 +186,19 @@ impl BodyFk {
                     self.g1.default_pos[j] + f(DOF_POS.start + j) / sc.dof_pos;
             }
         }
+        // the base's linear velocity: none, or the commanded one (the state's
+        // heading frame is the world's here: its yaw is 0)
+        let base = if self.with_base_velocity {
+            [
+                f(COMMAND.start) / sc.commands[0],
+                f(COMMAND.start + 1) / sc.commands[1],
+                0.0,
+            ]
+        } else {
+            [0.0; 3]
+        };
         let qvel = self.data.qvel_mut();
-        qvel[..3].copy_from_slice(&[0.0, 0.0, 0.0]);
+        qvel[..3].copy_from_slice(&base);
         for a in 0..3 {
             qvel[3 + a] = f(ANG_VEL.start + a) / sc.ang_vel;
         }
@@ -199,7 +225,11 @@ impl BodyFk {
         let yaw = quat_yaw(xquat[pelvis]);
         let sc = yaw.sin_cos();
         let q_h_inv = [(yaw / 2.0).cos(), 0.0, 0.0, -(yaw / 2.0).sin()];
-        let vp = point_vel(pelvis);
+        let vp = if self.with_base_velocity {
+            [0.0; 3]
+        } else {
+            point_vel(pelvis)
+        };
         let mut out = BodyFrames::default();
         for (k, &b) in self.bodies.iter().enumerate() {
             out.pos[k] = unyaw(sc, sub(xpos[b], xpos[pelvis]));

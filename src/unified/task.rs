@@ -33,7 +33,7 @@ use std::path::Path;
 use tch::{Device, Tensor};
 
 use super::amp::Discriminator;
-use super::config::UnifiedConfig;
+use super::config::{BaseVelocity, UnifiedConfig};
 use super::fk::BodyFk;
 use super::plan::{History, Plan};
 use super::track::TrackingErrors;
@@ -151,7 +151,8 @@ impl UnifiedTask {
         let n = env.n_envs();
         let model = env.envs()[0].data().model().clone();
         let fk = BodyFk::new(model, &cfg.env.observation.scales)
-            .map_err(|e| RlError::Invalid(format!("tracked bodies: {e}")))?;
+            .map_err(|e| RlError::Invalid(format!("tracked bodies: {e}")))?
+            .with_base_velocity(u.tracking.base_velocity == BaseVelocity::Command);
         tch::manual_seed(cfg.train.seed as i64 ^ 0x00A1_1CE5);
         let disc = Discriminator::new(&u.amp, Device::Cpu);
         let dt = env.shared().dt;
