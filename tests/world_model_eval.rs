@@ -114,7 +114,10 @@ fn eval_world_model_reports_every_measurement() {
     assert_eq!(r.horizon_rmse_raw["joint_pos"].len(), 4);
     assert_eq!(r.horizon_rmse_raw.len(), 7);
     assert_eq!(keys(&r.guidance), ["0", "1", "5"]);
-    assert_eq!(keys(&r.samplers), ["ddim10", "ddim20", "ddim5", "ddpm"]);
+    assert_eq!(
+        keys(&r.samplers),
+        ["ddim1", "ddim10", "ddim2", "ddim20", "ddim5", "ddpm"]
+    );
     assert_eq!(r.samplers["ddpm"].steps, 20);
     assert_eq!(keys(&r.drift), ["10", "250"]);
     // 15 windows shared over the five kinds, all present in the validation split
@@ -211,6 +214,31 @@ fn eval_world_model_reports_every_measurement() {
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(j["windows"], 5);
     assert_eq!(j["horizon_rmse"].as_array().unwrap().len(), 4);
+
+    // another sampling than the checkpoint's: every measurement uses it
+    let out = Command::new(env!("CARGO_BIN_EXE_dreampolicy"))
+        .args(["eval", "world-model", "--json", "--windows", "5"])
+        .args(["--guidance", "1", "--ddim-steps", "2", "--checkpoint"])
+        .arg(&ck)
+        .arg("--data")
+        .arg(dir.0.join("data"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let j2: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(j2["sampling"]["sampler"], "ddim");
+    assert_eq!(j2["sampling"]["ddim_steps"], 2);
+    assert_eq!(j2["sampling"]["guidance"], 1.0);
+    assert_eq!(j2["samplers"]["ddim5"]["guidance"], 1.0);
+    assert_ne!(j2["horizon_rmse"], j["horizon_rmse"]);
+    let mut bad = opts(7);
+    bad.ddim_steps = Some(21);
+    let e = evaluate(&ck, &bad).err().unwrap().to_string();
+    assert!(e.contains("--ddim-steps 21") && e.contains("20"), "{e}");
 
     // a missing dataset (by --data or the checkpoint's data.path) and a missing checkpoint
     let mut bad = opts(7);

@@ -33,6 +33,12 @@ pub struct EvalWmArgs {
     /// Print the report as one JSON object.
     #[arg(long)]
     json: bool,
+    /// Guidance ω instead of the checkpoint's (e.g. a unified config's `unified.sampling.guidance`).
+    #[arg(long)]
+    guidance: Option<f64>,
+    /// DDIM with this many steps instead of the checkpoint's sampler.
+    #[arg(long)]
+    ddim_steps: Option<usize>,
 }
 
 pub fn run(a: EvalWmArgs) -> Result<()> {
@@ -42,6 +48,8 @@ pub fn run(a: EvalWmArgs) -> Result<()> {
         seed: a.seed,
         threads: a.threads.max(1),
         plot: a.plot,
+        guidance: a.guidance,
+        ddim_steps: a.ddim_steps,
         ..WmEvalOptions::default()
     };
     let r = evaluate(&a.checkpoint, &opts)

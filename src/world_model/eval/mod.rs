@@ -66,7 +66,7 @@ use episodes::{Pick, ValidationSet};
 /// The guidance scales compared.
 pub const GUIDANCE: [f64; 3] = [0.0, 1.0, 5.0];
 /// DDIM step counts compared with DDPM.
-pub const DDIM_STEPS: [usize; 3] = [5, 10, 20];
+pub const DDIM_STEPS: [usize; 5] = [1, 2, 5, 10, 20];
 
 /// What to evaluate on and how much.
 #[derive(Debug, Clone)]
@@ -84,6 +84,11 @@ pub struct WmEvalOptions {
     pub max_frames_per_kind: usize,
     /// Draw the trajectories PNG here.
     pub plot: Option<PathBuf>,
+    /// The sampling measured instead of the checkpoint's `sampling`: its
+    /// guidance ω, and DDIM with this many steps (a unified config's
+    /// `unified.sampling`, say).
+    pub guidance: Option<f64>,
+    pub ddim_steps: Option<usize>,
 }
 
 impl Default for WmEvalOptions {
@@ -96,6 +101,8 @@ impl Default for WmEvalOptions {
             drift_frames: vec![50, 250],
             max_frames_per_kind: 200_000,
             plot: None,
+            guidance: None,
+            ddim_steps: None,
         }
     }
 }
@@ -265,7 +272,20 @@ pub fn evaluate(checkpoint: &Path, opts: &WmEvalOptions) -> Result<WmEvalReport,
     let hist = states.narrow(1, 0, k as i64);
     let real = states.narrow(1, k as i64, h as i64);
     let scan = val.scans(&picks, h, 1).select(1, 0).to_device(dev);
-    let sc = cfg.sampling.clone();
+    let mut sc = cfg.sampling.clone();
+    if let Some(g) = opts.guidance {
+        sc.guidance = g;
+    }
+    if let Some(n) = opts.ddim_steps {
+        if n == 0 || n > wm.sched.steps() {
+            return Err(WmError::Invalid(format!(
+                "--ddim-steps {n}: between 1 and the model's {} diffusion steps",
+                wm.sched.steps()
+            )));
+        }
+        sc.sampler = SamplerKind::Ddim;
+        sc.ddim_steps = n;
+    }
     let seed_a = splitmix64(seed ^ 0x22);
     let seed_b = splitmix64(seed ^ 0x33);
 

@@ -139,7 +139,7 @@ pub struct WmEvalReport {
     pub mean_state_rmse: f64,
     /// Keyed by `omega` (`"0"`, `"1"`, `"5"`).
     pub guidance: BTreeMap<String, GuidanceScore>,
-    /// Keyed `ddpm`, `ddim5`, `ddim10`, `ddim20`.
+    /// Keyed `ddpm`, `ddim1`, `ddim2`, `ddim5`, `ddim10`, `ddim20`.
     pub samplers: BTreeMap<String, SamplerScore>,
     /// Keyed by terrain kind.
     pub terrain_sensitivity: BTreeMap<String, Sensitivity>,
