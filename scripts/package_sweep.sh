@@ -28,7 +28,13 @@ for run in "$src"/[0-9][0-9][0-9]-*/; do
   [ -d "$run/plots" ] && cp -r "$run/plots" "$out/$r/"
   if [ -f "$run/result.json" ]; then
     cp "$run/result.json" "$out/$r/"
-    "$BIN" checkpoint strip --out "$out/$r/checkpoints/latest.pt" "$run/checkpoints/latest.pt" >/dev/null
+    # a run copied back from models/sweeps/ already holds its inference copy
+    if ! err="$("$BIN" checkpoint strip --out "$out/$r/checkpoints/latest.pt" "$run/checkpoints/latest.pt" 2>&1 >/dev/null)"; then
+      case "$err" in
+        *"already an inference copy"*) cp "$run/checkpoints/latest.pt" "$out/$r/checkpoints/latest.pt" ;;
+        *) echo "$err" >&2; exit 1 ;;
+      esac
+    fi
     echo "$r: finished, inference copy"
   else
     rm -f "$out/$r/result.json"
