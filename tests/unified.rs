@@ -9,7 +9,9 @@ use dreampolicy::env::VecEnv;
 use dreampolicy::robot::NUM_JOINTS;
 use dreampolicy::terrain::TerrainKind;
 use dreampolicy::unified::amp::{AmpConfig, Discriminator, AMP_DIM, AMP_FEATURES};
-use dreampolicy::unified::fk::{quat_from_gravity, quat_mul, BodyFk, BodyFrames, N_TRACKED};
+use dreampolicy::unified::fk::{
+    quat_from_gravity, quat_mul, quat_yaw, BodyFk, BodyFrames, N_TRACKED,
+};
 use dreampolicy::unified::plan::{History, Plan};
 use dreampolicy::unified::track::{TrackingErrors, TrackingSigmas};
 use rand::{Rng, SeedableRng};
@@ -125,11 +127,7 @@ fn with_the_base_velocity_a_robot_slower_than_its_command_is_off_the_plan() {
             let d = v.envs()[e].data();
             let (qpos, qvel) = (d.qpos().to_vec(), d.qvel().to_vec());
             // the pelvis's velocity in its heading frame, from the free joint
-            let q = &qpos[3..7];
-            let yaw = f64::atan2(
-                2.0 * (q[0] * q[3] + q[1] * q[2]),
-                1.0 - 2.0 * (q[2] * q[2] + q[3] * q[3]),
-            );
+            let yaw = quat_yaw([qpos[3], qpos[4], qpos[5], qpos[6]]);
             let (sy, cy) = yaw.sin_cos();
             let vp = [
                 cy * qvel[0] + sy * qvel[1],

@@ -192,44 +192,24 @@ fn eval_world_model_reports_every_measurement() {
     assert_ne!(other.horizon_rmse, r.horizon_rmse);
 
     // the CLI: JSON on stdout, --data overrides the dataset
-    let out = Command::new(env!("CARGO_BIN_EXE_dreampolicy"))
-        .args([
-            "eval",
-            "world-model",
-            "--json",
-            "--windows",
-            "5",
-            "--checkpoint",
-        ])
-        .arg(&ck)
-        .arg("--data")
-        .arg(dir.0.join("data"))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let cli_json = |extra: &[&str]| -> serde_json::Value {
+        let out = common::run_ok_bytes(
+            Command::new(env!("CARGO_BIN_EXE_dreampolicy"))
+                .args(["eval", "world-model", "--json", "--windows", "5"])
+                .args(extra)
+                .arg("--checkpoint")
+                .arg(&ck)
+                .arg("--data")
+                .arg(dir.0.join("data")),
+        );
+        serde_json::from_slice(&out).unwrap()
+    };
+    let j = cli_json(&[]);
     assert_eq!(j["windows"], 5);
     assert_eq!(j["horizon_rmse"].as_array().unwrap().len(), 4);
 
     // another sampling than the checkpoint's: every measurement uses it
-    let out = Command::new(env!("CARGO_BIN_EXE_dreampolicy"))
-        .args(["eval", "world-model", "--json", "--windows", "5"])
-        .args(["--guidance", "1", "--ddim-steps", "2", "--checkpoint"])
-        .arg(&ck)
-        .arg("--data")
-        .arg(dir.0.join("data"))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let j2: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let j2 = cli_json(&["--guidance", "1", "--ddim-steps", "2"]);
     assert_eq!(j2["sampling"]["sampler"], "ddim");
     assert_eq!(j2["sampling"]["ddim_steps"], 2);
     assert_eq!(j2["sampling"]["guidance"], 1.0);

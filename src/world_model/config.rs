@@ -367,7 +367,9 @@ impl WorldModelConfig {
 }
 
 impl SamplingConfig {
-    fn validate(&self, key: &str, steps: usize) -> Result<(), ConfigError> {
+    /// Refuse DDIM steps outside `1..=steps` and a non-finite guidance; `key`
+    /// names the config section in the message.
+    pub(crate) fn validate(&self, key: &str, steps: usize) -> Result<(), ConfigError> {
         if self.sampler == SamplerKind::Ddim && !(1..=steps).contains(&self.ddim_steps) {
             return Err(ConfigError::Invalid(format!(
                 "{key}.ddim_steps must be in 1..=diffusion.steps ({steps}), got {}",

@@ -272,19 +272,26 @@ pub fn evaluate(checkpoint: &Path, opts: &WmEvalOptions) -> Result<WmEvalReport,
     let hist = states.narrow(1, 0, k as i64);
     let real = states.narrow(1, k as i64, h as i64);
     let scan = val.scans(&picks, h, 1).select(1, 0).to_device(dev);
+    let n_steps = wm.sched.steps();
     let mut sc = cfg.sampling.clone();
     if let Some(g) = opts.guidance {
         sc.guidance = g;
     }
     if let Some(n) = opts.ddim_steps {
-        if n == 0 || n > wm.sched.steps() {
-            return Err(WmError::Invalid(format!(
-                "--ddim-steps {n}: between 1 and the model's {} diffusion steps",
-                wm.sched.steps()
-            )));
-        }
         sc.sampler = SamplerKind::Ddim;
         sc.ddim_steps = n;
+    }
+    // the overrides meet the config's own check, named by the flags given
+    let flags: Vec<String> = [
+        opts.guidance.map(|g| format!("--guidance {g}")),
+        opts.ddim_steps.map(|n| format!("--ddim-steps {n}")),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    if !flags.is_empty() {
+        sc.validate("sampling", n_steps)
+            .map_err(|e| WmError::Invalid(format!("{}: {e}", flags.join(" "))))?;
     }
     let seed_a = splitmix64(seed ^ 0x22);
     let seed_b = splitmix64(seed ^ 0x33);
@@ -375,7 +382,6 @@ pub fn evaluate(checkpoint: &Path, opts: &WmEvalOptions) -> Result<WmEvalReport,
     }
 
     // samplers
-    let n_steps = wm.sched.steps();
     let mut variants = vec![("ddpm".to_string(), SamplerKind::Ddpm, n_steps)];
     for s in DDIM_STEPS.into_iter().filter(|&s| s <= n_steps) {
         variants.push((format!("ddim{s}"), SamplerKind::Ddim, s));
