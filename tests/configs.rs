@@ -148,3 +148,93 @@ fn every_shipped_config_loads() {
         .to_string();
     assert!(e.contains("learning_rat"), "{e}");
 }
+
+/// A trainer config written as another one changed (`base:` and `set:`) is
+/// exactly its base with those `--set` overrides, through a chain of such
+/// files, with the command line's `--set` last; anything else beside `base:`
+/// and a loop of bases are refused with a line that says what to do.
+#[test]
+fn a_derived_config_is_its_base_with_its_set_list() {
+    use dreampolicy::rl::config::load;
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let uneven = root.join("configs/specialist/paper/uneven.yaml");
+    let dir = tempfile::tempdir().unwrap();
+    let yaml = |c: &dreampolicy::rl::config::ExperimentConfig| serde_yaml::to_string(c).unwrap();
+    let write = |name: &str, text: &str| {
+        let p = dir.path().join(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    };
+    let one = write(
+        "one.yaml",
+        &format!(
+            "# a comment\nbase: {}\nset:\n  - \"env.terrain.map.kinds={{stair: 1.0}}\"\n  - ppo.learning_rate=3.0e-4\n",
+            uneven.display()
+        ),
+    );
+    let sets = [
+        "env.terrain.map.kinds={stair: 1.0}".to_string(),
+        "ppo.learning_rate=3.0e-4".to_string(),
+    ];
+    let derived = load(&one, &[]).unwrap();
+    assert_eq!(yaml(&derived), yaml(&load(&uneven, &sets).unwrap()));
+    // the set replaces the base's mapping, it does not merge into it
+    assert_eq!(derived.env.terrain.map.kinds.len(), 1);
+    assert!(derived.ppo.learning_rate != load(&uneven, &[]).unwrap().ppo.learning_rate);
+
+    // a chain of two, and the command line after both
+    let two = write(
+        "two.yaml",
+        &format!("base: {}\nset: [train.iterations=7]\n", one.display()),
+    );
+    let cli = ["train.iterations=9".to_string()];
+    let mut all = sets.to_vec();
+    all.push("train.iterations=7".into());
+    assert_eq!(
+        yaml(&load(&two, &[]).unwrap()),
+        yaml(&load(&uneven, &all).unwrap())
+    );
+    assert_eq!(load(&two, &cli).unwrap().train.iterations, 9);
+
+    // a world-model file inherits the same way
+    let wm = root.join("configs/world_model/small.yaml");
+    let wm_child = write(
+        "wm.yaml",
+        &format!("base: {}\nset: [\"train.iterations=124\"]\n", wm.display()),
+    );
+    let a = dreampolicy::world_model::config::load_world_model(&wm_child, &[]).unwrap();
+    let b =
+        dreampolicy::world_model::config::load_world_model(&wm, &["train.iterations=124".into()])
+            .unwrap();
+    assert_eq!(
+        serde_yaml::to_string(&a).unwrap(),
+        serde_yaml::to_string(&b).unwrap()
+    );
+
+    // a mapping beside base: is refused, naming the key and the way to write it
+    let mixed = write(
+        "mixed.yaml",
+        &format!(
+            "base: {}\nppo:\n  learning_rate: 1.0e-3\n",
+            uneven.display()
+        ),
+    );
+    let e = load(&mixed, &[]).err().unwrap().to_string();
+    assert!(e.contains("`ppo`") && e.contains("set:"), "{e}");
+    // a set item that is not a string
+    let not_str = write(
+        "notstr.yaml",
+        &format!("base: {}\nset:\n  - {{a: 1}}\n", uneven.display()),
+    );
+    let e = load(&not_str, &[]).err().unwrap().to_string();
+    assert!(e.contains("key.path=value"), "{e}");
+    // a loop of bases ends with a message, not a stack overflow
+    let looped = dir.path().join("loop.yaml");
+    std::fs::write(&looped, format!("base: {}\n", looped.display())).unwrap();
+    let e = load(&looped, &[]).err().unwrap().to_string();
+    assert!(e.contains("loop"), "{e}");
+    // a missing base names the file
+    let missing = write("missing.yaml", "base: no/such/file.yaml\n");
+    let e = load(&missing, &[]).err().unwrap().to_string();
+    assert!(e.contains("no/such/file.yaml"), "{e}");
+}

@@ -9,6 +9,11 @@
 //! world model: `configs/world_model/`). All structs use `deny_unknown_fields`.
 //! This module sits below all of them and imports none of them (only the
 //! leaf [`crate::seal`], whose seal a run directory's `config.yaml` carries).
+//!
+//! A trainer config (`rl::config`, `world_model::config`) may be written as
+//! another one changed: `base: <file>` and `set: [key.path=value, ...]`, the
+//! overrides `--set` would give, applied to the base in order (the file's
+//! `--set` arguments after them). See [`parse_inheriting`].
 use std::path::{Path, PathBuf};
 
 /// Everything that can go wrong reading a config.
@@ -55,6 +60,79 @@ pub fn parse<T: serde::de::DeserializeOwned>(
         message: e.to_string(),
     })?;
     parse_value(value, label, overrides)
+}
+
+/// How deep `base:` files may nest before a loop is assumed.
+const MAX_BASE_DEPTH: usize = 8;
+
+/// Like [`parse`], for a trainer config that may be another one changed: a
+/// file whose top level is `base: <path>` (relative to the working
+/// directory, like every path in a config) and `set:` (a list of
+/// `key.path=value`, exactly as `--set` takes them, each replacing the value
+/// at its path) is its base file's config (itself possibly a `base:` file)
+/// with those overrides; nothing else may stand beside them, so that what a
+/// derived config changes is always a list of replacements, never a merge of
+/// two mappings. `overrides` (the command line's `--set`) come last.
+pub fn parse_inheriting<T: serde::de::DeserializeOwned>(
+    text: &str,
+    label: &str,
+    overrides: &[String],
+) -> Result<T, ConfigError> {
+    let value = resolve_base(text, label, 0)?;
+    parse_value(value, label, overrides)
+}
+
+/// The YAML value of a config's text with its `base:` chain applied.
+fn resolve_base(text: &str, label: &str, depth: usize) -> Result<serde_yaml::Value, ConfigError> {
+    let bad = |message: String| ConfigError::Parse {
+        path: label.to_string(),
+        message,
+    };
+    let mut value: serde_yaml::Value =
+        serde_yaml::from_str(text).map_err(|e| bad(e.to_string()))?;
+    let Some(map) = value.as_mapping_mut() else {
+        return Ok(value);
+    };
+    let Some(base) = map.remove("base") else {
+        return Ok(value);
+    };
+    let base = base
+        .as_str()
+        .ok_or_else(|| bad("`base:` must be a path (a string)".into()))?
+        .to_string();
+    let sets = match map.remove("set") {
+        None => Vec::new(),
+        Some(serde_yaml::Value::Sequence(items)) => items
+            .into_iter()
+            .map(|v| match v {
+                serde_yaml::Value::String(s) => Ok(s),
+                _ => Err(bad(
+                    "`set:` items must be strings `key.path=value` (quote them)".into(),
+                )),
+            })
+            .collect::<Result<Vec<_>, _>>()?,
+        Some(_) => return Err(bad("`set:` must be a list of `key.path=value`".into())),
+    };
+    if let Some(k) = map.keys().next() {
+        return Err(bad(format!(
+            "a config with `base:` holds only `set:` beside it, found `{}`: write the change as \
+             a `set:` item (`{}=...`)",
+            k.as_str().unwrap_or("?"),
+            k.as_str().unwrap_or("key")
+        )));
+    }
+    if depth >= MAX_BASE_DEPTH {
+        return Err(bad(format!(
+            "`base:` files nest deeper than {MAX_BASE_DEPTH} (a loop?) at {base}"
+        )));
+    }
+    let path = Path::new(&base);
+    let base_text = read(path)?;
+    let mut value = resolve_base(&base_text, &path.display().to_string(), depth + 1)?;
+    for arg in &sets {
+        apply_override(&mut value, arg).map_err(|e| bad(format!("in `set:`: {e}")))?;
+    }
+    Ok(value)
 }
 
 /// [`parse`] from a YAML value (e.g. a config already in memory, serialized).

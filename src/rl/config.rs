@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use std::path::Path;
 
-use crate::config::{parse, read, ConfigError};
+use crate::config::{parse_inheriting, read, ConfigError};
 use crate::env::config::EnvConfig;
 
 /// A whole experiment file. Sections other than `env` have defaults (the paper's).
@@ -131,7 +131,7 @@ pub fn from_str(
     label: &str,
     overrides: &[String],
 ) -> Result<ExperimentConfig, ConfigError> {
-    let cfg: ExperimentConfig = parse(text, label, overrides)?;
+    let cfg: ExperimentConfig = parse_inheriting(text, label, overrides)?;
     cfg.validate()?;
     Ok(cfg)
 }

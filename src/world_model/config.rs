@@ -7,7 +7,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use crate::config::{parse, read, ConfigError};
+use crate::config::{parse_inheriting, read, ConfigError};
 
 /// A whole world-model file. Only `data.path` is required.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -400,7 +400,7 @@ pub fn world_model_from_str(
     label: &str,
     overrides: &[String],
 ) -> Result<WorldModelConfig, ConfigError> {
-    let cfg: WorldModelConfig = parse(text, label, overrides)?;
+    let cfg: WorldModelConfig = parse_inheriting(text, label, overrides)?;
     cfg.validate()?;
     Ok(cfg)
 }
