@@ -29,12 +29,7 @@ for run in "$src"/[0-9][0-9][0-9]-*/; do
   if [ -f "$run/result.json" ]; then
     cp "$run/result.json" "$out/$r/"
     # a run copied back from models/sweeps/ already holds its inference copy
-    if ! err="$("$BIN" checkpoint strip --out "$out/$r/checkpoints/latest.pt" "$run/checkpoints/latest.pt" 2>&1 >/dev/null)"; then
-      case "$err" in
-        *"already an inference copy"*) cp "$run/checkpoints/latest.pt" "$out/$r/checkpoints/latest.pt" ;;
-        *) echo "$err" >&2; exit 1 ;;
-      esac
-    fi
+    "$BIN" checkpoint strip --if-needed --out "$out/$r/checkpoints/latest.pt" "$run/checkpoints/latest.pt" >/dev/null
     echo "$r: finished, inference copy"
   else
     rm -f "$out/$r/result.json"

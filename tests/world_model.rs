@@ -710,4 +710,14 @@ fn an_inference_copy_plans_as_its_source_and_cannot_resume() {
         .unwrap();
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("already an inference copy"));
+    // unless asked to copy it as it is: the same bytes, seal and all
+    let again = dir.0.join("again.pt");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_dreampolicy"))
+        .args(["checkpoint", "strip", "--if-needed", "--out"])
+        .arg(&again)
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(std::fs::read(&again).unwrap(), std::fs::read(&out).unwrap());
 }

@@ -48,6 +48,11 @@ pub enum CheckpointCommand {
         out: PathBuf,
         /// A world-model checkpoint.
         file: PathBuf,
+        /// When FILE is already an inference copy, copy it to --out as it
+        /// is (its seal intact) instead of refusing: what a script packaging
+        /// finished and already-stripped runs alike wants.
+        #[arg(long)]
+        if_needed: bool,
     },
 }
 
@@ -155,7 +160,11 @@ pub fn run(which: CheckpointCommand) -> Result<()> {
             );
             Ok(())
         }
-        CheckpointCommand::Strip { out, file } => {
+        CheckpointCommand::Strip {
+            out,
+            file,
+            if_needed,
+        } => {
             if out == file {
                 bail!(
                     "--out {} is the file to strip: write the copy elsewhere",
@@ -164,7 +173,22 @@ pub fn run(which: CheckpointCommand) -> Result<()> {
             }
             let ck = dreampolicy::world_model::checkpoint::WmCheckpoint::read(&file)?;
             if ck.meta().inference_only {
-                bail!("{} is already an inference copy", file.display());
+                if !if_needed {
+                    bail!(
+                        "{} is already an inference copy (--if-needed copies it as it is)",
+                        file.display()
+                    );
+                }
+                std::fs::copy(&file, &out).with_context(|| {
+                    format!("cannot copy {} to {}", file.display(), out.display())
+                })?;
+                println!(
+                    "copied {} to {}: already an inference copy (step {})",
+                    file.display(),
+                    out.display(),
+                    ck.meta().iteration
+                );
+                return Ok(());
             }
             ck.write_inference_copy(&out)?;
             let size = |p: &Path| std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
