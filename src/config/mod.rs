@@ -55,11 +55,15 @@ pub fn parse<T: serde::de::DeserializeOwned>(
     label: &str,
     overrides: &[String],
 ) -> Result<T, ConfigError> {
-    let value: serde_yaml::Value = serde_yaml::from_str(text).map_err(|e| ConfigError::Parse {
+    parse_value(yaml_value(text, label)?, label, overrides)
+}
+
+/// The YAML value of a config's text; a syntax error names `label`.
+fn yaml_value(text: &str, label: &str) -> Result<serde_yaml::Value, ConfigError> {
+    serde_yaml::from_str(text).map_err(|e| ConfigError::Parse {
         path: label.to_string(),
         message: e.to_string(),
-    })?;
-    parse_value(value, label, overrides)
+    })
 }
 
 /// How deep `base:` files may nest before a loop is assumed.
@@ -88,8 +92,7 @@ fn resolve_base(text: &str, label: &str, depth: usize) -> Result<serde_yaml::Val
         path: label.to_string(),
         message,
     };
-    let mut value: serde_yaml::Value =
-        serde_yaml::from_str(text).map_err(|e| bad(e.to_string()))?;
+    let mut value = yaml_value(text, label)?;
     let Some(map) = value.as_mapping_mut() else {
         return Ok(value);
     };
@@ -114,11 +117,10 @@ fn resolve_base(text: &str, label: &str, depth: usize) -> Result<serde_yaml::Val
         Some(_) => return Err(bad("`set:` must be a list of `key.path=value`".into())),
     };
     if let Some(k) = map.keys().next() {
+        let k = k.as_str().unwrap_or("key");
         return Err(bad(format!(
-            "a config with `base:` holds only `set:` beside it, found `{}`: write the change as \
-             a `set:` item (`{}=...`)",
-            k.as_str().unwrap_or("?"),
-            k.as_str().unwrap_or("key")
+            "a config with `base:` holds only `set:` beside it, found `{k}`: write the change as \
+             a `set:` item (`{k}=...`)"
         )));
     }
     if depth >= MAX_BASE_DEPTH {
