@@ -134,6 +134,67 @@ fn curriculum_promotes_walkers_and_demotes_fallers() {
     assert!(spawn[0] > b.x[0] && spawn[0] < b.x[1], "{spawn:?} in {b:?}");
 }
 
+/// `levels_by_kind` (the `level_<kind>` columns of `metrics.csv`): each kind's
+/// mean over the envs on its columns, counted by hand, and following a
+/// promotion; nothing on a single-kind map or without a curriculum.
+#[test]
+fn levels_by_kind_average_each_kinds_envs() {
+    use dreampolicy::env::task::VecTask;
+    use dreampolicy::terrain::TerrainKind;
+    let c = cfg(&["env.n_envs=10", "env.terrain.init_max_level=4"]);
+    let mut v = VecEnv::new(&c.env).unwrap();
+    let by_hand = |v: &VecEnv| -> Vec<(TerrainKind, f64)> {
+        let m = v.shared().scene.terrain.as_ref().unwrap();
+        TerrainKind::TRAINING
+            .into_iter()
+            .map(|k| {
+                let ls: Vec<f64> = v
+                    .envs()
+                    .iter()
+                    .filter(|e| m.tile_kind(e.column()) == k)
+                    .map(|e| e.terrain_level() as f64)
+                    .collect();
+                (k, ls.iter().sum::<f64>() / ls.len() as f64)
+            })
+            .collect()
+    };
+    let got = VecTask::levels_by_kind(&v);
+    assert_eq!(got.len(), 5, "{got:?}");
+    assert_eq!(got, by_hand(&v));
+    let kind_of = |v: &VecEnv, i: usize| {
+        let m = v.shared().scene.terrain.as_ref().unwrap();
+        m.tile_kind(v.envs()[i].column())
+    };
+    let n_on = (0..10)
+        .filter(|&i| kind_of(&v, i) == kind_of(&v, 0))
+        .count();
+    let zeros = vec![0.0f32; 10 * NUM_JOINTS];
+    v.step(&zeros);
+    let kind0 = kind_of(&v, 0);
+    let before = VecTask::levels_by_kind(&v);
+    teleport(&mut v, 0, 5.0, 0.3, true);
+    v.step(&zeros);
+    let after = VecTask::levels_by_kind(&v);
+    assert_eq!(after, by_hand(&v));
+    let level = |l: &[(TerrainKind, f64)]| l.iter().find(|(k, _)| *k == kind0).unwrap().1;
+    assert!(
+        (level(&after) - level(&before) - 1.0 / n_on as f64).abs() < 1e-12,
+        "{before:?} -> {after:?}"
+    );
+    // the kinds' means weighted by their envs make up the batch's mean
+    let weighted: f64 = after
+        .iter()
+        .map(|(k, l)| l * (0..10).filter(|&i| kind_of(&v, i) == *k).count() as f64)
+        .sum::<f64>()
+        / 10.0;
+    assert!((weighted - v.mean_terrain_level()).abs() < 1e-12);
+
+    let single = cfg(&["env.n_envs=2", "env.terrain.map.kinds={stair: 1.0}"]);
+    assert!(VecTask::levels_by_kind(&VecEnv::new(&single.env).unwrap()).is_empty());
+    let fixed = cfg(&["env.n_envs=2", "env.terrain.curriculum=false"]);
+    assert!(VecTask::levels_by_kind(&VecEnv::new(&fixed.env).unwrap()).is_empty());
+}
+
 #[test]
 fn a_fall_remembers_the_condition_that_ended_it() {
     use dreampolicy::env::FallCause;

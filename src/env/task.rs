@@ -87,6 +87,16 @@ pub trait VecTask {
     /// Mean planar velocity and yaw-rate tracking errors of the batch now (NaN if none).
     fn tracking_errors(&self) -> [f64; 2];
     fn mean_level(&self) -> f64;
+    /// Mean curriculum level of the envs on each terrain kind of a mixed map
+    /// with a curriculum (the `level_<kind>` columns of `metrics.csv`), the
+    /// kinds in [`TerrainKind::ALL`]'s order, NaN for a kind no env stands on
+    /// at the moment; empty on a plane, a single-kind map or without a
+    /// curriculum. The kinds are the scene's, fixed for a run.
+    ///
+    /// [`TerrainKind::ALL`]: crate::terrain::TerrainKind::ALL
+    fn levels_by_kind(&self) -> Vec<(crate::terrain::TerrainKind, f64)> {
+        Vec::new()
+    }
     /// Multiplier of the penalty terms (penalty curriculum); 1 for tasks without.
     fn penalty_scale(&self) -> f64 {
         1.0
@@ -159,6 +169,9 @@ macro_rules! delegate_to_env {
         }
         fn mean_level(&self) -> f64 {
             self.$env.mean_terrain_level()
+        }
+        fn levels_by_kind(&self) -> Vec<($crate::terrain::TerrainKind, f64)> {
+            self.$env.levels_by_kind()
         }
         fn penalty_scale(&self) -> f64 {
             $crate::env::task::VecTask::penalty_scale(&self.$env)
@@ -234,6 +247,9 @@ impl VecTask for VecEnv {
     }
     fn mean_level(&self) -> f64 {
         self.mean_terrain_level()
+    }
+    fn levels_by_kind(&self) -> Vec<(crate::terrain::TerrainKind, f64)> {
+        VecEnv::levels_by_kind(self)
     }
     fn penalty_scale(&self) -> f64 {
         self.shared().rewards.penalty_scale

@@ -242,6 +242,38 @@ impl VecEnv {
             .sum()
     }
 
+    /// Mean terrain level of the envs on each kind of a mixed map with a
+    /// curriculum ([`crate::env::task::VecTask::levels_by_kind`]).
+    pub fn levels_by_kind(&self) -> Vec<(crate::terrain::TerrainKind, f64)> {
+        let sh = self.shared();
+        let Some(map) = sh.scene.terrain.as_ref() else {
+            return Vec::new();
+        };
+        if !sh.cfg.terrain.curriculum {
+            return Vec::new();
+        }
+        let kinds: Vec<_> = crate::terrain::TerrainKind::ALL
+            .into_iter()
+            .filter(|k| (0..map.num_cols()).any(|c| map.tile_kind(c) == *k))
+            .collect();
+        if kinds.len() < 2 {
+            return Vec::new();
+        }
+        kinds
+            .into_iter()
+            .map(|k| {
+                let (sum, n) = self
+                    .envs
+                    .iter()
+                    .filter(|e| map.tile_kind(e.column()) == k)
+                    .fold((0.0, 0usize), |(s, n), e| {
+                        (s + e.terrain_level() as f64, n + 1)
+                    });
+                (k, if n > 0 { sum / n as f64 } else { f64::NAN })
+            })
+            .collect()
+    }
+
     /// Mean terrain level of the batch.
     pub fn mean_terrain_level(&self) -> f64 {
         self.envs

@@ -50,6 +50,15 @@ pub fn plot_run(run_dir: &Path) -> Result<PathBuf, crate::plot::PlotError> {
     } else {
         &["value_loss", "surrogate_loss"]
     };
+    // the curve per kind beside the mean on a mixed map (`level_<kind>`)
+    let levels: Vec<&str> = std::iter::once("terrain_level")
+        .chain(
+            header
+                .iter()
+                .filter(|c| c.starts_with("level_"))
+                .map(|c| c.as_str()),
+        )
+        .collect();
     let panels = [
         Panel::new("episode return (last 100)", x, &["mean_return"]),
         Panel::new("episode length (steps)", x, &["mean_episode_length"]),
@@ -67,17 +76,23 @@ pub fn plot_run(run_dir: &Path) -> Result<PathBuf, crate::plot::PlotError> {
             x,
             &["time_physics_s", "time_inference_s", "time_update_s"],
         ),
-        Panel::new("mean terrain level", x, &["terrain_level"]),
+        Panel::new("mean terrain level", x, &levels),
     ];
     crate::run::plot_training(run_dir, &panels)
 }
 
-/// Metrics columns of a task: [`COLUMNS`], `rew_<term>`, then the task's own metrics.
+/// Metrics columns of a task: [`COLUMNS`], `rew_<term>`, the task's own
+/// metrics, then `level_<kind>` per kind of a mixed map with a curriculum.
 pub fn columns(task: &dyn VecTask) -> Vec<String> {
     COLUMNS
         .iter()
         .map(|c| c.to_string())
         .chain(task.reward_names().iter().map(|n| format!("rew_{n}")))
         .chain(task.extra_metric_names().iter().map(|n| n.to_string()))
+        .chain(
+            task.levels_by_kind()
+                .iter()
+                .map(|(k, _)| format!("level_{}", k.name())),
+        )
         .collect()
 }

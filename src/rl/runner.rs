@@ -307,6 +307,7 @@ impl<'a, T: VecTask> Trainer<'a, T> {
             .collect();
         (rs.mean_return, rs.mean_length) = self.stats.means();
         rs.level = self.task.mean_level();
+        rs.kind_levels = self.task.levels_by_kind().iter().map(|(_, l)| *l).collect();
         rs.penalty_scale = self.task.penalty_scale();
         if let Some(pc) = &self.cfg.env.rewards.penalty_curriculum {
             let max = self.task.max_episode_steps() as f64;
@@ -409,6 +410,8 @@ pub struct RolloutStats {
     pub penalty_scale: f64,
     /// The task's own metrics ([`VecTask::extra_metric_names`]).
     pub extra: Vec<f64>,
+    /// Mean level per terrain kind ([`VecTask::levels_by_kind`]).
+    pub kind_levels: Vec<f64>,
 }
 
 /// Train to `cfg.train.iterations` in `run`, from scratch or from `resume`;
@@ -480,6 +483,7 @@ pub fn learn<T: VecTask>(
         ];
         row.extend(&rs.terms);
         row.extend(&rs.extra);
+        row.extend(&rs.kind_levels);
         if cfg.policy.estimator.is_some() {
             row.push(l.estimator);
         }

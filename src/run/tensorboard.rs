@@ -49,7 +49,7 @@ pub const RSL_RL_TAGS: [(&str, &str); 9] = [
 /// The TensorBoard tag of a `metrics.csv` column: rsl_rl's name for the columns
 /// of [`RSL_RL_TAGS`], else `<group>/<column>` with the group
 /// * `Episode/`: what the env reports per episode or step: `rew_*`, `track_*`,
-///   `vel_error_*`, `fall_fraction`, `terrain_level`, `penalty_scale`,
+///   `vel_error_*`, `fall_fraction`, `terrain_level`, `level_*`, `penalty_scale`,
 ///   `style_reward`;
 /// * `Loss/`: a name holding `loss` or `grad_`, ending in `_mse`, or
 ///   `explained_variance`;
@@ -62,7 +62,7 @@ pub fn tag(column: &str) -> String {
         return t.to_string();
     }
     let starts = |p: &[&str]| p.iter().any(|p| column.starts_with(p));
-    let group = if starts(&["rew_", "track_", "vel_error_"])
+    let group = if starts(&["rew_", "track_", "vel_error_", "level_"])
         || matches!(
             column,
             "fall_fraction" | "terrain_level" | "penalty_scale" | "style_reward"
