@@ -330,6 +330,60 @@ fn history_padding_and_plan_shifting_across_resets() {
     assert_eq!(p.due().collect::<Vec<_>>(), [0, 1], "env 0 is 2 steps old");
 }
 
+/// `unified.plan=hold`, the inference ablation: every plan is the env's
+/// current state over the whole horizon, before and after steps; `eval` takes
+/// the key, training refuses it.
+#[test]
+fn the_hold_ablation_plans_the_current_state() {
+    let _t = torch_lock();
+    use dreampolicy::env::task::VecTask;
+    let cfg = common::load_config("test/unified_tiny.yaml", &["unified.plan=hold"]);
+    let mut task = dreampolicy::unified::task::UnifiedTask::new(&cfg).unwrap();
+    let (n, h) = (task.env().n_envs(), task.horizon());
+    let held = |task: &dreampolicy::unified::task::UnifiedTask| {
+        for i in 0..n {
+            let row = &task.plans()[i * h * OBS_DIM..(i + 1) * h * OBS_DIM];
+            for k in 1..h {
+                assert_eq!(
+                    row[k * OBS_DIM..(k + 1) * OBS_DIM],
+                    row[..OBS_DIM],
+                    "env {i}"
+                );
+            }
+        }
+    };
+    held(&task);
+    for i in 0..n {
+        assert_eq!(
+            task.plans()[i * h * OBS_DIM..i * h * OBS_DIM + OBS_DIM],
+            task.env().obs[i * OBS_DIM..(i + 1) * OBS_DIM],
+            "env {i}: s_0 itself"
+        );
+    }
+    let acts = vec![0.0f32; n * NUM_JOINTS];
+    for _ in 0..4 {
+        task.step(&acts);
+        held(&task);
+    }
+    let dir = common::Scratch::new("uni-hold");
+    let e = dreampolicy::unified::train(&cfg, &dir.0, false, true)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("unified.plan=hold") && e.contains("inference"),
+        "{e}"
+    );
+    // another source is a config error naming the key's values
+    let mut bad = common::load_config("test/unified_tiny.yaml", &[]);
+    if let Some(serde_yaml::Value::Mapping(m)) = bad.unified.as_mut() {
+        m.insert("plan".into(), "hover".into());
+    }
+    let e = dreampolicy::unified::config::UnifiedConfig::of(&bad)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("hover") && e.contains("hold"), "{e}");
+}
+
 /// A tiny unified run (the world model in the loop, the discriminator learning)
 /// stopped at its first checkpoint and resumed ends where the uninterrupted run
 /// ends: the same metrics rows (tracking scores, style reward and the
@@ -388,7 +442,15 @@ fn a_resumed_tiny_unified_run_is_bit_identical() {
     let ((header, ra), (_, rb)) = (rows(&a.0), rows(&b.0));
     assert_eq!(ra.len(), 4);
     assert_eq!(ra, rb, "the resumed run's metrics differ");
-    for name in ["amp_loss", "track_pos", "style_reward", "wm_plans"] {
+    // the mixed map's curriculum per kind (`level_<kind>`) beside the mean
+    for name in [
+        "amp_loss",
+        "track_pos",
+        "style_reward",
+        "wm_plans",
+        "level_flat",
+        "level_bridge",
+    ] {
         assert!(header.iter().any(|h| h == name), "no {name} column");
     }
     let at = |name: &str| header.iter().position(|h| h == name).unwrap();

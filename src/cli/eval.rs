@@ -70,7 +70,8 @@ pub struct EvalArgs {
     /// eval.time_limit_s=40` (repeatable). A unified policy also takes its
     /// inference keys: `unified.sampling.guidance=5`,
     /// `unified.sampling.ddim_steps=10`, `unified.sampling.sampler=ddpm`,
-    /// `unified.replan_every=1`.
+    /// `unified.replan_every=1`, `unified.plan=hold` (the current state held
+    /// over the horizon instead of the world model's plan: what the plan adds).
     #[arg(long = "set", value_name = "eval.KEY=VALUE")]
     set: Vec<String>,
     /// A unified policy's plans from this world-model checkpoint instead of

@@ -21,6 +21,11 @@ pub struct UnifiedConfig {
     /// every-step sampling.
     #[serde(default = "default_replan")]
     pub replan_every: usize,
+    /// Where the plans come from ([`PlanSource`]): the world model, or, as
+    /// an inference ablation of `eval`/`play` only, the env's current state
+    /// held over the horizon (what the plan adds to a trained policy).
+    #[serde(default, skip_serializing_if = "PlanSource::is_world_model")]
+    pub plan: PlanSource,
     /// Predicted states the policy's future encoder reads (the first ones of
     /// the plan); default: all `H`.
     #[serde(default)]
@@ -46,6 +51,26 @@ pub struct UnifiedConfig {
     /// every reset of the batch, so that a resumed run draws the same noise).
     #[serde(default)]
     pub seed: u64,
+}
+
+/// The source of the policy's plans.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PlanSource {
+    /// The world model's predicted futures (the paper's; training's only source).
+    #[default]
+    WorldModel,
+    /// Every predicted state is the env's current state: the world model is
+    /// not called. `train unified` refuses it (the discriminator would have no
+    /// real transitions); `eval --set unified.plan=hold` measures how much of
+    /// a trained policy's success the plans carry.
+    Hold,
+}
+
+impl PlanSource {
+    pub fn is_world_model(&self) -> bool {
+        *self == PlanSource::WorldModel
+    }
 }
 
 fn default_replan() -> usize {

@@ -305,6 +305,19 @@ impl UnifiedTask {
         }
         let t0 = std::time::Instant::now();
         let (k, h, d) = (self.history.len(), self.plan.horizon(), OBS_DIM);
+        if self.cfg.plan == super::config::PlanSource::Hold {
+            // the ablation: the newest state over the whole horizon
+            let mut held = vec![0.0f32; h * d];
+            for &i in &due {
+                let newest = &self.history.row(i)[(k - 1) * d..];
+                for c in held.chunks_exact_mut(d) {
+                    c.copy_from_slice(newest);
+                }
+                self.plan.set(i, &held);
+            }
+            self.sums.plans += due.len();
+            return;
+        }
         // the shapes were checked when the task was built
         let pred = super::plan::predict_due(
             &self.wm,
