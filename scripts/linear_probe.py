@@ -7,7 +7,10 @@ dataset's normalized units (stats.json), per horizon step and per state block,
 next to holding the last state and the dataset mean.
 
     python3 -m venv /tmp/np && /tmp/np/bin/pip install numpy mcap
-    /tmp/np/bin/python scripts/linear_probe.py runs/dataset [K] [H]
+    /tmp/np/bin/python scripts/linear_probe.py runs/dataset [K] [H] [SHARDS]
+
+SHARDS: comma-separated shard numbers to read instead of 0,1 (e.g. 4,6,8,10
+for one shard of each terrain kind of the turning dataset).
 """
 import json
 import sys
@@ -25,12 +28,13 @@ def main():
     ds = sys.argv[1]
     k = int(sys.argv[2]) if len(sys.argv) > 2 else 4
     h = int(sys.argv[3]) if len(sys.argv) > 3 else 8
+    shards = [int(v) for v in sys.argv[4].split(",")] if len(sys.argv) > 4 else [0, 1]
     st = json.load(open(f"{ds}/stats.json"))
     mean = np.array(st["state"]["mean"])
     std = np.array(st["state"]["std"])
     std[std < 1e-8] = 1.0
     eps = {}
-    for shard in ("shard-00000.mcap", "shard-00001.mcap"):
+    for shard in (f"shard-{i:05d}.mcap" for i in shards):
         try:
             f = open(f"{ds}/{shard}", "rb")
         except FileNotFoundError:
@@ -38,7 +42,7 @@ def main():
         with f:
             for _, _, m in make_reader(f).iter_messages(topics=["/frames"]):
                 d = m.data
-                ep = int.from_bytes(d[0:8], "little")
+                ep = (shard, int.from_bytes(d[0:8], "little"))
                 eps.setdefault(ep, []).append(np.frombuffer(d[80:80 + 4 * S], dtype="<f4"))
     xs, ys, ids = [], [], []
     for i, frames in enumerate(eps.values()):
