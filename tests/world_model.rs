@@ -245,6 +245,38 @@ fn the_model_predicts_the_future_from_its_history() {
     assert!(v.next_mse < 0.1, "next-window MSE {:.4}", v.next_mse);
 }
 
+/// `model.history_skip_fit`: at a fresh start the history skip is the
+/// least-squares map of the history, so the untrained model already predicts
+/// the synthetic episodes' next window far better than the zero-started one
+/// (which scores about the variance) and than after the 300 steps above.
+#[test]
+fn the_history_skip_starts_at_the_least_squares_fit() {
+    let _t = torch_lock();
+    let dir = Scratch::new("wm-skip-fit");
+    write_dataset(&dir.0, 4, 200);
+    let sets = [
+        "train.rollout_windows=1",
+        "train.val_sequences=16",
+        "train.batch_size=32",
+    ];
+    let zero = WmTrainer::new(&tiny(&dir.0, &sets), None).unwrap();
+    let mut with = sets.to_vec();
+    with.push("model.history_skip_fit=400");
+    let fit = WmTrainer::new(&tiny(&dir.0, &with), None).unwrap();
+    let (z, f) = (zero.validate().unwrap(), fit.validate().unwrap());
+    eprintln!(
+        "next-window MSE at step 0: zero {:.4}, fitted {:.4}",
+        z.next_mse, f.next_mse
+    );
+    assert!(z.next_mse > 0.5, "zero-started {:.4}", z.next_mse);
+    assert!(f.next_mse < 0.05, "fitted {:.4}", f.next_mse);
+    // without the skip the key changes nothing
+    let mut off = with.clone();
+    off.push("model.history_skip=false");
+    let n = WmTrainer::new(&tiny(&dir.0, &off), None).unwrap();
+    assert!(n.validate().unwrap().next_mse > 0.5);
+}
+
 #[test]
 fn samplers_are_deterministic_for_a_seed() {
     let _t = torch_lock();

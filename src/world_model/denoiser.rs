@@ -277,6 +277,41 @@ impl Denoiser {
     }
 
     /// Copy every parameter of `other` (same architecture) into this one.
+    /// Set the history skip to the least-squares map from the flattened
+    /// normalized histories `hist [N, K, S]` to the first horizon chunk
+    /// `future [N, H, S]` (ridge `lambda` times the mean squared input on the
+    /// diagonal, bias unpenalized, solved in double precision). Returns the
+    /// fit's mean squared error on those rows; `None` without a skip.
+    pub fn fit_skip(&self, hist: &Tensor, future: &Tensor, lambda: f64) -> Option<f64> {
+        let skip = self.skip.as_ref()?;
+        tch::no_grad(|| {
+            let n = hist.size()[0];
+            let x = hist.flatten(1, -1).to_kind(Kind::Double);
+            let y = future.flatten(1, -1).to_kind(Kind::Double);
+            let xa = Tensor::cat(&[&x, &Tensor::ones([n, 1], (Kind::Double, x.device()))], 1);
+            let d = xa.size()[1];
+            let mut a = xa.transpose(0, 1).matmul(&xa);
+            let ridge = lambda * x.square().mean(Kind::Double).double_value(&[]) * n as f64;
+            let eye = Tensor::ones([d], (Kind::Double, x.device()));
+            let _ = eye.narrow(0, d - 1, 1).fill_(0.0);
+            a += Tensor::diag_embed(&(eye * ridge), 0, -2, -1);
+            let w = Tensor::linalg_solve(&a, &xa.transpose(0, 1).matmul(&y), true);
+            let mse = (xa.matmul(&w) - &y)
+                .square()
+                .mean(Kind::Double)
+                .double_value(&[]);
+            let ws = w.narrow(0, 0, d - 1).transpose(0, 1).to_kind(Kind::Float);
+            let bs = w.get(d - 1).to_kind(Kind::Float);
+            let mut sw = skip.ws.shallow_clone();
+            sw.copy_(&ws);
+            if let Some(b) = &skip.bs {
+                let mut b = b.shallow_clone();
+                b.copy_(&bs);
+            }
+            Some(mse)
+        })
+    }
+
     pub fn copy_from(&mut self, other: &Denoiser) -> Result<(), tch::TchError> {
         self.vs.copy(&other.vs)
     }

@@ -158,6 +158,15 @@ impl WmTrainer {
             None => Normalizer::from_stats(&dataset_stats(&dataset, cfg)?, dev),
         };
         let net = Denoiser::new(&cfg.model, dims.state, dims.scan, dev);
+        if resume.is_none() && cfg.model.history_skip && cfg.model.history_skip_fit > 0 {
+            // a stream of its own over the train split (the training stream
+            // starts at its beginning as without the fit)
+            let mut seqs = Sequences::new(Dataset::open(path, ReadOptions::default())?, cfg)?;
+            let windows = seqs.next_windows(cfg.model.history_skip_fit)?;
+            let b = SeqBatch::from_windows(&windows, Sequences::spec(cfg)?, &norm, dev);
+            let h = cfg.model.horizon as i64;
+            net.fit_skip(&b.history, &b.future.narrow(1, 0, h), 1e-3);
+        }
         let mut ema = Denoiser::new(&cfg.model, dims.state, dims.scan, dev);
         ema.copy_from(&net)?;
         let mut opt = Adam::new(net.named_parameters(), cfg.train.learning_rate);
