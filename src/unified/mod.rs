@@ -35,13 +35,13 @@ pub fn train(
     // the task plans with the world model as it starts: on the run's thread
     // count already, or its first plans differ from a resumed run's
     tch::set_num_threads(cfg.train.torch_threads as i32);
-    if config::UnifiedConfig::of(cfg)?.plan != config::PlanSource::WorldModel {
+    let mut task = task::UnifiedTask::new(cfg)?;
+    if task.cfg.plan != config::PlanSource::WorldModel {
         return Err(RlError::Invalid(
             "unified.plan=hold is an inference ablation for eval and play; \
              training plans with the world model (remove the key)"
                 .into(),
         ));
     }
-    let mut task = task::UnifiedTask::new(cfg)?;
     train_task(cfg, &mut task, run_dir, resume, quiet)
 }

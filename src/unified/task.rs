@@ -309,10 +309,7 @@ impl UnifiedTask {
             // the ablation: the newest state over the whole horizon
             let mut held = vec![0.0f32; h * d];
             for &i in &due {
-                let newest = &self.history.row(i)[(k - 1) * d..];
-                for c in held.chunks_exact_mut(d) {
-                    c.copy_from_slice(newest);
-                }
+                hold_state(&mut held, &self.history.row(i)[(k - 1) * d..]);
                 self.plan.set(i, &held);
             }
             self.sums.plans += due.len();
@@ -332,9 +329,7 @@ impl UnifiedTask {
             let newest = &self.history.row(i)[(k - 1) * d..];
             let mut row = &pred[j * h * d..(j + 1) * h * d];
             if row.iter().any(|v| !v.is_finite()) {
-                for c in held.chunks_exact_mut(d) {
-                    c.copy_from_slice(newest);
-                }
+                hold_state(&mut held, newest);
                 row = &held;
                 self.sums.nonfinite += 1;
             } else {
@@ -458,6 +453,15 @@ fn write_row(dst: &mut [f32], plan: &[f32], dots: Option<&[f32]>) {
 }
 
 /// Env `i`'s noise-free state: the first `OBS_DIM` entries of its critic row.
+/// A plan of `state` held over every horizon step of `plan` (its length a
+/// multiple of `state`'s): the hold ablation's plans and a non-finite
+/// plan's stand-in.
+fn hold_state(plan: &mut [f32], state: &[f32]) {
+    for c in plan.chunks_exact_mut(state.len()) {
+        c.copy_from_slice(state);
+    }
+}
+
 fn clean_state(critic: &[f32], i: usize) -> &[f32] {
     &critic[i * CRITIC_DIM..i * CRITIC_DIM + OBS_DIM]
 }

@@ -276,14 +276,15 @@ impl Denoiser {
             .sum()
     }
 
-    /// Copy every parameter of `other` (same architecture) into this one.
     /// Set the history skip to the least-squares map from the flattened
     /// normalized histories `hist [N, K, S]` to the first horizon chunk
     /// `future [N, H, S]` (ridge `lambda` times the mean squared input on the
-    /// diagonal, bias unpenalized, solved in double precision). Returns the
-    /// fit's mean squared error on those rows; `None` without a skip.
-    pub fn fit_skip(&self, hist: &Tensor, future: &Tensor, lambda: f64) -> Option<f64> {
-        let skip = self.skip.as_ref()?;
+    /// diagonal, bias unpenalized, solved in double precision). Nothing
+    /// without a skip (`history_skip: false`).
+    pub fn fit_skip(&self, hist: &Tensor, future: &Tensor, lambda: f64) {
+        let Some(skip) = self.skip.as_ref() else {
+            return;
+        };
         tch::no_grad(|| {
             let n = hist.size()[0];
             let x = hist.flatten(1, -1).to_kind(Kind::Double);
@@ -296,10 +297,6 @@ impl Denoiser {
             let _ = eye.narrow(0, d - 1, 1).fill_(0.0);
             a += Tensor::diag_embed(&(eye * ridge), 0, -2, -1);
             let w = Tensor::linalg_solve(&a, &xa.transpose(0, 1).matmul(&y), true);
-            let mse = (xa.matmul(&w) - &y)
-                .square()
-                .mean(Kind::Double)
-                .double_value(&[]);
             let ws = w.narrow(0, 0, d - 1).transpose(0, 1).to_kind(Kind::Float);
             let bs = w.get(d - 1).to_kind(Kind::Float);
             let mut sw = skip.ws.shallow_clone();
@@ -308,10 +305,10 @@ impl Denoiser {
                 let mut b = b.shallow_clone();
                 b.copy_(&bs);
             }
-            Some(mse)
         })
     }
 
+    /// Copy every parameter of `other` (same architecture) into this one.
     pub fn copy_from(&mut self, other: &Denoiser) -> Result<(), tch::TchError> {
         self.vs.copy(&other.vs)
     }

@@ -157,13 +157,14 @@ impl WmTrainer {
             Some(ck) => ck.normalizer(dev)?,
             None => Normalizer::from_stats(&dataset_stats(&dataset, cfg)?, dev),
         };
+        let spec = Sequences::spec(cfg)?;
         let net = Denoiser::new(&cfg.model, dims.state, dims.scan, dev);
         if resume.is_none() && cfg.model.history_skip && cfg.model.history_skip_fit > 0 {
             // a stream of its own over the train split (the training stream
             // starts at its beginning as without the fit)
             let mut seqs = Sequences::new(Dataset::open(path, ReadOptions::default())?, cfg)?;
             let windows = seqs.next_windows(cfg.model.history_skip_fit)?;
-            let b = SeqBatch::from_windows(&windows, Sequences::spec(cfg)?, &norm, dev);
+            let b = SeqBatch::from_windows(&windows, spec, &norm, dev);
             let h = cfg.model.horizon as i64;
             net.fit_skip(&b.history, &b.future.narrow(1, 0, h), 1e-3);
         }
@@ -171,7 +172,6 @@ impl WmTrainer {
         ema.copy_from(&net)?;
         let mut opt = Adam::new(net.named_parameters(), cfg.train.learning_rate);
         let val = validation_windows(&dataset, cfg, cfg.train.val_sequences)?;
-        let spec = Sequences::spec(cfg)?;
         let val = (!val.is_empty()).then(|| SeqBatch::from_windows(&val, spec, &norm, dev));
         let mut data = Sequences::new(dataset, cfg)?;
         let (mut iteration, mut sequences, mut wall_offset, mut last_val) = (0, 0, 0.0, None);
