@@ -62,6 +62,12 @@ fn eval_reports_what_ended_the_falls() {
         r.falls_mean_distance
     );
     assert!((0.5..=1.0).contains(&r.falls_mean_commanded_speed), "{r:?}");
+    // a first-step fall happens where the walk spawned, on the lane's centre line
+    assert!(
+        r.falls_mean_abs_lateral_offset < 0.05,
+        "{}",
+        r.falls_mean_abs_lateral_offset
+    );
     // no counted step before a first-step fall: no precursor, no full window
     let p = r.fall_precursors;
     assert!((p.window_s - 1.0).abs() < 1e-9);
@@ -75,6 +81,7 @@ fn eval_reports_what_ended_the_falls() {
     let r = evaluate(&ck, &opts(2)).unwrap();
     assert_eq!(r.fall_causes, dreampolicy::eval::FallCauses::default());
     assert!(r.falls_mean_distance.is_nan() && r.falls_mean_commanded_speed.is_nan());
+    assert!(r.falls_mean_abs_lateral_offset.is_nan());
 }
 
 #[test]

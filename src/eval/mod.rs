@@ -39,6 +39,10 @@ pub struct EvalReport {
     /// fast commands, and where on the lane.
     pub falls_mean_commanded_speed: f64,
     pub falls_mean_distance: f64,
+    /// Mean |lateral offset| of the pelvis from its spawn point (the lane's
+    /// centre line) when a walk fell (m; NaN without a fall): a fall off a
+    /// bridge's side or a drift off the lane shows here, a fall in place does not.
+    pub falls_mean_abs_lateral_offset: f64,
     /// What the feet did in the second before each fall, beside how often the
     /// same happens in any second of the counted walks.
     pub fall_precursors: FallPrecursors,
@@ -329,6 +333,7 @@ pub fn evaluate_in(
         fall_causes: t.causes,
         falls_mean_commanded_speed: t.fall_cmd_sum / t.falls as f64,
         falls_mean_distance: t.fall_dist_sum / t.falls as f64,
+        falls_mean_abs_lateral_offset: t.fall_lat_sum / t.falls as f64,
         fall_precursors: t.precursors(env_cfg.sim.control_dt()),
         mean_forward_speed: t.fwd_sum / d,
         mean_commanded_speed: t.cmd_sum / d,
@@ -457,7 +462,8 @@ fn run_episodes<T: EvalTask>(
                 let last = e.last_episode_end();
                 let dist = last.base_pos[0] - last.spawn[0];
                 if counted[i] && out.terminated {
-                    t.fell(last.fall, dist, last.command[0], &watch[i]);
+                    let lateral = (last.base_pos[1] - last.spawn[1]).abs();
+                    t.fell(last.fall, [dist, lateral], last.command[0], &watch[i]);
                 }
                 Some((
                     if out.terminated {
@@ -688,6 +694,7 @@ struct Tally {
     causes: FallCauses,
     fall_cmd_sum: f64,
     fall_dist_sum: f64,
+    fall_lat_sum: f64,
     /// Full windows of [`PRECURSOR_STEPS`] counted steps, and those holding
     /// each foot event (straddle, stumble, flight).
     windows: u64,
@@ -735,7 +742,8 @@ impl Tally {
     }
 
     /// A counted walk fell.
-    fn fell(&mut self, cause: Option<crate::env::FallCause>, dist: f64, cmd: f64, w: &Watch) {
+    /// `at`: the distance along the lane and the |lateral offset| where it fell.
+    fn fell(&mut self, cause: Option<crate::env::FallCause>, at: [f64; 2], cmd: f64, w: &Watch) {
         use crate::env::FallCause;
         match cause {
             Some(FallCause::Contact) => self.causes.contact += 1,
@@ -744,7 +752,8 @@ impl Tally {
             None => self.causes.blowup += 1,
         }
         self.fall_cmd_sum += cmd;
-        self.fall_dist_sum += dist;
+        self.fall_dist_sum += at[0];
+        self.fall_lat_sum += at[1];
         let window = (1u128 << PRECURSOR_STEPS) - 1;
         for j in 0..3 {
             self.fall_hits[j] += (w.recent[j] & window != 0) as u64;
