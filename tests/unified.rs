@@ -374,14 +374,61 @@ fn the_hold_ablation_plans_the_current_state() {
         "{e}"
     );
     // another source is a config error naming the key's values
+    let e = unified_config_error("plan", "hover");
+    assert!(e.contains("hover") && e.contains("hold"), "{e}");
+}
+
+/// `unified.history: clean` plans from the env's noise-free states (the
+/// critic's copy, what the expert dataset holds), `observed` from the
+/// policy's noisy observations: read through the hold ablation, whose plan is
+/// the history's newest state.
+#[test]
+fn a_clean_history_holds_the_noise_free_states() {
+    let _t = torch_lock();
+    use dreampolicy::env::obs::CRITIC_DIM;
+    use dreampolicy::env::task::VecTask;
+    let noisy = [
+        "env.observation.add_noise=true",
+        "unified.plan=hold",
+        "unified.replan_every=1",
+    ];
+    for clean in [true, false] {
+        let mut sets = noisy.to_vec();
+        if clean {
+            sets.push("unified.history=clean");
+        }
+        let cfg = common::load_config("test/unified_tiny.yaml", &sets);
+        let mut task = dreampolicy::unified::task::UnifiedTask::new(&cfg).unwrap();
+        let (n, h) = (task.env().n_envs(), task.horizon());
+        let acts = vec![0.0f32; n * NUM_JOINTS];
+        for step in 0..3 {
+            if step > 0 {
+                task.step(&acts);
+            }
+            for i in 0..n {
+                let planned = &task.plans()[i * h * OBS_DIM..i * h * OBS_DIM + OBS_DIM];
+                let critic = &task.env().critic()[i * CRITIC_DIM..i * CRITIC_DIM + OBS_DIM];
+                let obs = &task.env().obs[i * OBS_DIM..(i + 1) * OBS_DIM];
+                assert_ne!(critic, obs, "env {i}: the observation noise is on");
+                let want = if clean { critic } else { obs };
+                assert_eq!(planned, want, "env {i} step {step} clean {clean}");
+            }
+        }
+    }
+    // another source is a config error naming the key's values
+    let e = unified_config_error("history", "privileged");
+    assert!(e.contains("privileged") && e.contains("clean"), "{e}");
+}
+
+/// The error of the tiny unified config with `unified.<key>: <value>`.
+fn unified_config_error(key: &str, value: &str) -> String {
     let mut bad = common::load_config("test/unified_tiny.yaml", &[]);
     if let Some(serde_yaml::Value::Mapping(m)) = bad.unified.as_mut() {
-        m.insert("plan".into(), "hover".into());
+        m.insert(key.into(), value.into());
     }
-    let e = dreampolicy::unified::config::UnifiedConfig::of(&bad)
+    dreampolicy::unified::config::UnifiedConfig::of(&bad)
         .unwrap_err()
-        .to_string();
-    assert!(e.contains("hover") && e.contains("hold"), "{e}");
+        .to_string()
 }
 
 /// A tiny unified run (the world model in the loop, the discriminator learning)

@@ -245,12 +245,14 @@ pub fn save_controller(path: &Path, meta: &CheckpointMeta) -> Result<(), RlError
 /// The `--set` keys of a unified policy's inference that `eval`, `play` and
 /// `render` may change (prefixes): the world model the plans come from, its
 /// sampler, step count and guidance, the re-planning interval, and the plan's
-/// source (`unified.plan=hold`, the ablation that holds the current state).
-pub const INFERENCE_KEYS: [&str; 4] = [
+/// source (`unified.plan=hold`, the ablation that holds the current state)
+/// and the states it plans from (`unified.history`).
+pub const INFERENCE_KEYS: [&str; 5] = [
     "unified.world_model=",
     "unified.sampling.",
     "unified.replan_every=",
     "unified.plan=",
+    "unified.history=",
 ];
 
 /// `sets` and, when given, `unified.world_model=<world_model>` after them

@@ -19,7 +19,9 @@
 //!    followed by the env's live scandots with `unified.scandots`.
 //!
 //! The world model's history holds the env's actor states (with its
-//! observation noise: what a robot's sensors give). Each plan made at `t` also
+//! observation noise: what a robot's sensors give), or with
+//! `unified.history: clean` its noise-free states (what the world model was
+//! trained on; [`HistorySource`]). Each plan made at `t` also
 //! gives the discriminator a real transition `(s_t, ŝ_{t+1})`; the policy's
 //! `(s_t, s_{t+1})` are the fake ones; [`VecTask::after_rollout`] updates it
 //! once per iteration on both. The discriminator's `s_t` and `s_{t+1}` are the
@@ -33,7 +35,7 @@ use std::path::Path;
 use tch::{Device, Tensor};
 
 use super::amp::Discriminator;
-use super::config::{BaseVelocity, UnifiedConfig};
+use super::config::{BaseVelocity, HistorySource, UnifiedConfig};
 use super::fk::BodyFk;
 use super::plan::{History, Plan};
 use super::track::TrackingErrors;
@@ -195,8 +197,8 @@ impl UnifiedTask {
     /// its history restarts from the new `s_0` and it gets a new plan now.
     pub fn reset_env(&mut self, i: usize) {
         self.env.reset_env(i);
-        let obs = &self.env.obs[i * OBS_DIM..(i + 1) * OBS_DIM];
-        self.history.reset(i, obs);
+        self.history
+            .reset(i, history_state(&self.env, self.cfg.history, i));
         self.plan.invalidate(i);
         self.replan();
         self.write_scan();
@@ -274,8 +276,8 @@ impl UnifiedTask {
     fn start_all(&mut self) {
         let n = self.env.n_envs();
         for i in 0..n {
-            let obs = &self.env.obs[i * OBS_DIM..(i + 1) * OBS_DIM];
-            self.history.reset(i, obs);
+            self.history
+                .reset(i, history_state(&self.env, self.cfg.history, i));
             self.plan.invalidate(i);
         }
         let mut seed = self.cfg.seed ^ 0x9E37_79B9_7F4A_7C15;
@@ -409,7 +411,7 @@ impl UnifiedTask {
         self.plan.advance();
         let (fw, row) = (self.future * d, self.scan_width());
         for i in 0..n {
-            let obs = &self.env.obs[i * d..(i + 1) * d];
+            let obs = history_state(&self.env, self.cfg.history, i);
             if self.outcomes[i].episode_done {
                 let (plan, _) = self.plan.future(i);
                 let dots = &self.env.final_scan[i * SCAN_DIM..(i + 1) * SCAN_DIM];
@@ -449,6 +451,15 @@ fn write_row(dst: &mut [f32], plan: &[f32], dots: Option<&[f32]>) {
     dst[..plan.len()].copy_from_slice(plan);
     if let Some(dots) = dots {
         dst[plan.len()..].copy_from_slice(dots);
+    }
+}
+
+/// Env `i`'s state as the world model's history takes it (`unified.history`):
+/// its observation, or its noise-free state.
+fn history_state(env: &VecEnv, source: HistorySource, i: usize) -> &[f32] {
+    match source {
+        HistorySource::Observed => &env.obs[i * OBS_DIM..(i + 1) * OBS_DIM],
+        HistorySource::Clean => clean_state(env.critic(), i),
     }
 }
 
