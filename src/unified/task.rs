@@ -411,7 +411,7 @@ impl UnifiedTask {
         self.plan.advance();
         let (fw, row) = (self.future * d, self.scan_width());
         for i in 0..n {
-            let obs = history_state(&self.env, self.cfg.history, i);
+            let s = history_state(&self.env, self.cfg.history, i);
             if self.outcomes[i].episode_done {
                 let (plan, _) = self.plan.future(i);
                 let dots = &self.env.final_scan[i * SCAN_DIM..(i + 1) * SCAN_DIM];
@@ -422,9 +422,9 @@ impl UnifiedTask {
                     dots,
                 );
                 self.plan.invalidate(i);
-                self.history.reset(i, obs);
+                self.history.reset(i, s);
             } else {
-                self.history.push(i, obs);
+                self.history.push(i, s);
             }
         }
         self.replan();
@@ -463,7 +463,6 @@ fn history_state(env: &VecEnv, source: HistorySource, i: usize) -> &[f32] {
     }
 }
 
-/// Env `i`'s noise-free state: the first `OBS_DIM` entries of its critic row.
 /// A plan of `state` held over every horizon step of `plan` (its length a
 /// multiple of `state`'s): the hold ablation's plans and a non-finite
 /// plan's stand-in.
@@ -473,6 +472,7 @@ fn hold_state(plan: &mut [f32], state: &[f32]) {
     }
 }
 
+/// Env `i`'s noise-free state: the first `OBS_DIM` entries of its critic row.
 fn clean_state(critic: &[f32], i: usize) -> &[f32] {
     &critic[i * CRITIC_DIM..i * CRITIC_DIM + OBS_DIM]
 }
